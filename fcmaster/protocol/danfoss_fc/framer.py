@@ -1,0 +1,74 @@
+"""Cuts a received byte stream into checked FC telegrams.
+
+Theory of operation: the buffer head is either noise (anything but STX), which is handed
+back at once, or a candidate telegram starting with STX. A candidate is judged by its LGE
+(must be 6, 14 or 10 + a text length within ``max_text_length``), then, once LGE + 2 bytes
+are in, by its BCC. A rejected candidate gives up only its STX byte and the rest is
+scanned again, so a real telegram that starts inside noise or inside a broken candidate is
+still found. Nothing here knows about time: when the bus sees an inter-character gap it
+calls :meth:`FcFramer.reset`, and candidates that started before the gap and are still
+incomplete are given up the same way (reason ``gap``) instead of waiting for bytes that
+would only be glued on from a later telegram.
+"""
+
+from __future__ import annotations
+
+from fcmaster.protocol.danfoss_fc.telegram import LGE_PROCESS, LGE_TEXT_BASE, STX, bcc
+from fcmaster.protocol.framing import Frame, Skipped, SkipReason
+
+DEFAULT_MAX_TEXT_LENGTH = 64  # drive identification texts (15-4x) are at most 40 characters
+
+
+class FcFramer:
+    """Incremental framer for FC telegrams; fed any chunks, it never raises."""
+
+    __slots__ = ("_buf", "_horizon", "_max_lge")
+
+    def __init__(self, *, max_text_length: int = DEFAULT_MAX_TEXT_LENGTH) -> None:
+        self._buf = bytearray()
+        self._horizon = 0  # bytes before this index arrived before the last gap
+        self._max_lge = min(LGE_TEXT_BASE + max_text_length, 0xFF)
+
+    def feed(self, data: bytes) -> None:
+        """Append received bytes."""
+        self._buf += data
+
+    @property
+    def buffered(self) -> int:
+        """Bytes fed but not yet handed out."""
+        return len(self._buf)
+
+    def reset(self) -> None:
+        """Mark a gap: candidates begun before it may no longer wait for more bytes."""
+        self._horizon = len(self._buf)
+
+    def next_frame(self) -> Frame | Skipped | None:
+        """Return the next checked frame or skipped piece, or None if more bytes are needed."""
+        buf = self._buf
+        if not buf:
+            return None
+        if buf[0] != STX:
+            start = buf.find(STX)
+            return self._skip(len(buf) if start < 0 else start, SkipReason.NOISE)
+        if len(buf) < 2:
+            return self._skip(1, SkipReason.GAP) if self._horizon else None
+        lge = buf[1]
+        if lge != LGE_PROCESS and lge < LGE_TEXT_BASE:
+            return self._skip(1, SkipReason.BAD_LENGTH)
+        if lge > self._max_lge:
+            return self._skip(1, SkipReason.OVERFLOW)
+        total = lge + 2
+        if len(buf) < total:
+            return self._skip(1, SkipReason.GAP) if self._horizon else None
+        frame = bytes(buf[:total])
+        if bcc(frame) != 0:
+            return self._skip(1, SkipReason.CHECKSUM)
+        del buf[:total]
+        self._horizon = max(0, self._horizon - total)
+        return Frame(frame)
+
+    def _skip(self, count: int, reason: SkipReason) -> Skipped:
+        data = bytes(self._buf[:count])
+        del self._buf[:count]
+        self._horizon = max(0, self._horizon - count)
+        return Skipped(data, reason)
