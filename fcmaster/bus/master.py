@@ -1,0 +1,517 @@
+"""BusMaster: the one asyncio task that owns a half-duplex line.
+
+Theory of operation
+-------------------
+One transaction is in flight at any time. The loop asks the :class:`Planner` for a step,
+waits out the pause the protocol asks after the previous reply, drops stale input, writes
+the request as one burst, and reads until the codec's framer yields a frame that answers
+it or the deadline passes. Frames from another address, malformed frames and noise are
+counted and the read goes on; after a timeout the line is left to drain (a late reply is
+discarded before the next request instead of being taken for it).
+
+The turnaround between a reply and the next request is the master's whole overhead, so the
+loop does there only what decides the next request: decode, planner update, encode. Drive
+updates for the layers above are handed on right *after* the next request is written, while
+it is on the wire. Command results are resolved at once.
+
+The pause is counted from the reply's arrival, so the work inside it is free; the clock's
+sleep must be precise for this to hold (see :mod:`fcmaster.clock`).
+
+A port that fails (adapter unplugged, server gone) takes the line down: queued commands end
+``cancelled`` with the reason, and the port is reopened with capped, jittered exponential
+backoff on the injected clock. Other lines are separate BusMasters and never notice.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import random
+from collections import deque
+from collections.abc import Callable
+from functools import partial
+from typing import Protocol
+
+import structlog
+
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.bus.planner import Completion, Planner, Report, Step, StepKind
+from fcmaster.bus.stats import DriveStats, LineStats
+from fcmaster.bus.transport import Transport
+from fcmaster.clock import Clock
+from fcmaster.errors import (
+    MalformedReply,
+    PortError,
+    ProtocolError,
+    ReplyTimeout,
+    UnexpectedReply,
+)
+from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
+from fcmaster.protocol.framing import Frame, SkipReason
+
+log = structlog.get_logger("fcmaster.bus")
+
+BACKOFF_FIRST_S = 0.5
+BACKOFF_MAX_S = 30.0
+
+
+class BusObserver(Protocol):
+    """Where a BusMaster reports what it learns. Calls must be quick and never block."""
+
+    def drive_replied(self, drive: DrivePlan, reply: Reply, at: float) -> None:
+        """A valid reply from ``drive`` arrived at monotonic time ``at``."""
+
+    def drive_availability(self, drive: DrivePlan, online: bool, at: float) -> None:
+        """``drive`` came online or was demoted."""
+
+    def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
+        """The line's port opened or was lost."""
+
+    def command_completed(self, drive: str, command: Command, result: CommandResult) -> None:
+        """A command ended."""
+
+
+class _NullObserver:
+    def drive_replied(self, drive: DrivePlan, reply: Reply, at: float) -> None:
+        pass
+
+    def drive_availability(self, drive: DrivePlan, online: bool, at: float) -> None:
+        pass
+
+    def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
+        pass
+
+    def command_completed(self, drive: str, command: Command, result: CommandResult) -> None:
+        pass
+
+
+class BusMaster:
+    """Polls and commands the drives of one line. Use as ``async with BusMaster(...)``."""
+
+    def __init__(
+        self,
+        plan: LinePlan,
+        *,
+        codec: DriveCodec,
+        transport: Transport,
+        clock: Clock,
+        observer: BusObserver | None = None,
+        rng: random.Random | None = None,
+    ) -> None:
+        self.plan = plan
+        self.codec = codec
+        self.planner = Planner(plan, codec)
+        self.stats = LineStats(drives={d.name: DriveStats() for d in plan.drives})
+        self.recent_frames: deque[tuple[str, str]] = deque(maxlen=32)  # flight recorder
+        self._transport = transport
+        self._clock = clock
+        self._observer: BusObserver = observer or _NullObserver()
+        self._rng = rng or random.Random()
+        self._framer = codec.new_framer()
+        self._pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
+        self._wake = asyncio.Event()
+        self._task: asyncio.Task[None] | None = None
+        self._up = False
+        self._down_reason = "not started"
+        self._closing = False
+        self._deferred: list[Callable[[], None]] = []
+        self._log = log.bind(bus=plan.name, port=plan.port)
+
+    # -- lifecycle -----------------------------------------------------------------------
+
+    async def __aenter__(self) -> BusMaster:
+        if self._task is not None:
+            raise RuntimeError("BusMaster is already running; it is not re-entrant")
+        self._closing = False
+        self._task = asyncio.create_task(self._run(), name=f"bus[{self.plan.name}].master")
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.close()
+
+    async def close(self) -> None:
+        """Stop the loop, end every queued command as cancelled, close the port."""
+        self._closing = True
+        task, self._task = self._task, None
+        if task is not None:
+            task.cancel()
+            try:
+                await task
+            except asyncio.CancelledError:
+                current = asyncio.current_task()
+                if current is not None and current.cancelling():
+                    raise
+        self._resolve(self.planner.cancel_all(f"{self.plan.name} shut down"))
+        await self._transport.close()
+
+    @property
+    def is_up(self) -> bool:
+        """Whether the port is open and the line is being served."""
+        return self._up
+
+    # -- commands ------------------------------------------------------------------------
+
+    def drive(self, name: str) -> Drive:
+        """The handle of drive ``name``; KeyError if the line has none."""
+        return Drive(self, self.planner.slot(name).plan)
+
+    async def execute(self, name: str | None, command: Command) -> CommandResult:
+        """Carry out ``command`` on drive ``name`` (None: broadcast); one result, always."""
+        future: asyncio.Future[CommandResult] = asyncio.get_running_loop().create_future()
+        if not self._up or self._closing:
+            self._resolve(
+                [
+                    Completion(
+                        (future,), command, name or "*",
+                        CommandResult(
+                            outcome=Outcome.CANCELLED,
+                            reason=f"{self.plan.name} is down: {self._down_reason}",
+                        ),
+                    )
+                ]
+            )  # fmt: skip
+        else:
+            self._resolve(self.planner.submit(name, command, future))
+            self._wake.set()
+        return await future
+
+    # -- the loop ------------------------------------------------------------------------
+
+    async def _run(self) -> None:
+        attempt = 0
+        while not self._closing:
+            try:
+                await self._transport.open()
+            except PortError as exc:
+                self._down_reason = str(exc)
+                delay = min(BACKOFF_MAX_S, BACKOFF_FIRST_S * 2**attempt)
+                delay *= 0.8 + 0.4 * self._rng.random()
+                attempt += 1
+                self._log.warning("bus.open_failed", error=str(exc), retry_in_s=round(delay, 2))
+                await self._clock.sleep(delay)
+                continue
+            attempt = 0
+            now = self._clock.now()
+            self._up = True
+            self.stats.up_since = now
+            self._log.info("bus.opened")
+            self._observer.line_availability(self.plan.name, True, "", now)
+            try:
+                await self._serve()
+            except PortError as exc:
+                self._line_lost(str(exc))
+                await self._transport.close()
+                self.stats.reopens += 1
+                await self._clock.sleep(BACKOFF_FIRST_S * (0.8 + 0.4 * self._rng.random()))
+
+    def _line_lost(self, reason: str) -> None:
+        self._up = False
+        self._down_reason = reason
+        now = self._clock.now()
+        self._log.warning("bus.lost", error=reason, recent_frames=list(self.recent_frames))
+        self._resolve(self.planner.cancel_all(f"{self.plan.name} lost its port: {reason}"))
+        for slot in self.planner.slots:
+            if slot.online:
+                slot.online = None
+                self._observer.drive_availability(slot.plan, False, now)
+        self._observer.line_availability(self.plan.name, False, reason, now)
+
+    async def _serve(self) -> None:
+        clock, transport, planner, stats = self._clock, self._transport, self.planner, self.stats
+        ready_at = clock.now()
+        replied_at: float | None = None
+        while True:
+            now = clock.now()
+            step = planner.next_step(now)
+            if step is None:
+                self._flush_deferred()
+                await self._idle(planner.next_wakeup(now))
+                continue
+            if ready_at > now:
+                await clock.sleep_until(ready_at)
+            stale = transport.discard_input()
+            if stale:
+                stats.late_bytes += len(stale)
+                self._log.debug("bus.discarded", frame=stale.hex(" "))
+            exchange = step.exchange
+            written_at = clock.now()
+            if replied_at is not None:
+                stats.turnaround.observe(max(0.0, written_at - replied_at - self._pause_s))
+                replied_at = None
+            await transport.write(exchange.request)
+            self._flush_deferred()
+            self._count_request(step)
+            if not exchange.expects_reply:
+                # Broadcasts and resets get no answer: give the drives time to act on it.
+                ready_at = (
+                    written_at
+                    + self.plan.wire_s(len(exchange.request))
+                    + self.plan.response_delay_s
+                    + self._pause_s
+                )
+                stats.busy_s += ready_at - written_at
+                self._handle(planner.on_sent(step, ready_at))
+                continue
+            deadline = written_at + self.plan.reply_timeout(
+                len(exchange.request), exchange.reply_length
+            )
+            reply = await self._receive(exchange, deadline)
+            now = clock.now()
+            if reply is None:
+                self._count_failure(step)
+                self._handle(planner.on_failure(step, now, self._timeout_reason(step)))
+                # Let a late reply finish arriving, so it is discarded, not misattributed.
+                ready_at = now + self.plan.wire_s(exchange.reply_length) + self.plan.gap_s
+                stats.busy_s += ready_at - written_at
+                continue
+            replied_at = now
+            ready_at = now + self._pause_s
+            stats.busy_s += ready_at - written_at
+            self._count_reply(step, reply, now - written_at)
+            self._handle(planner.on_reply(step, reply, now))
+            if step.slot is not None:
+                self._defer_reply(step.slot.plan, reply, now)
+
+    async def _receive(self, exchange: Exchange, deadline: float) -> Reply | None:
+        """Read until a frame answers ``exchange``; None at the deadline."""
+        framer, transport, clock = self._framer, self._transport, self._clock
+        gap_s = self.plan.gap_s
+        last_rx = clock.now()
+        while True:
+            read_deadline = min(deadline, last_rx + gap_s) if framer.buffered else deadline
+            try:
+                chunk = await transport.read(read_deadline)
+            except ReplyTimeout:
+                # A gap (or the deadline): an unfinished frame will not be completed.
+                framer.reset()
+                reply = self._drain_framer(exchange)
+                if reply is not None or read_deadline >= deadline:
+                    return reply
+                continue
+            last_rx = clock.now()
+            framer.feed(chunk)
+            reply = self._drain_framer(exchange)
+            if reply is not None:
+                return reply
+
+    def _drain_framer(self, exchange: Exchange) -> Reply | None:
+        stats = self.stats
+        while (piece := self._framer.next_frame()) is not None:
+            if isinstance(piece, Frame):
+                try:
+                    reply = self.codec.parse(exchange, piece.data)
+                except UnexpectedReply:
+                    stats.unexpected += 1
+                    self._record("unexpected", piece.data)
+                    continue
+                except (MalformedReply, ProtocolError):
+                    stats.malformed += 1
+                    self._record("malformed", piece.data)
+                    continue
+                self._framer_leftovers()
+                return reply
+            stats.noise_bytes += len(piece.data)
+            if piece.reason is SkipReason.CHECKSUM:
+                stats.checksum_errors += 1
+            self._record(str(piece.reason), piece.data)
+        return None
+
+    def _framer_leftovers(self) -> None:
+        """Bytes after the reply are late or noise; they are discarded before the next write."""
+        while (piece := self._framer.next_frame()) is not None:
+            self.stats.late_bytes += len(piece.data)
+        self._framer.reset()
+        while (piece := self._framer.next_frame()) is not None:
+            self.stats.late_bytes += len(piece.data)
+
+    async def _idle(self, wakeup: float | None) -> None:
+        """Nothing to send: wait for a command, or for the next probe to fall due."""
+        self._wake.clear()
+        waiter = asyncio.ensure_future(self._wake.wait())
+        try:
+            if wakeup is None:
+                await waiter
+                return
+            sleeper = asyncio.ensure_future(self._clock.sleep_until(wakeup))
+            try:
+                await asyncio.wait((waiter, sleeper), return_when=asyncio.FIRST_COMPLETED)
+            finally:
+                sleeper.cancel()
+        finally:
+            waiter.cancel()
+
+    # -- reporting -----------------------------------------------------------------------
+
+    def _handle(self, report: Report) -> None:
+        self._resolve(report.completions)
+        now = self._clock.now()
+        for transition in report.transitions:
+            drive, online = transition.drive, transition.online
+            if online:
+                self._log.info("drive.came_online", drive=drive.name, address=drive.address)
+            else:
+                self._log.warning(
+                    "drive.went_offline", drive=drive.name, address=drive.address,
+                    recent_frames=list(self.recent_frames),
+                )  # fmt: skip
+            self._deferred.append(partial(self._observer.drive_availability, drive, online, now))
+
+    def _resolve(self, completions: list[Completion]) -> None:
+        for completion in completions:
+            result = completion.result
+            command = completion.command
+            self._log.info(
+                "command.completed", actor=command.actor or "-", drive=completion.drive,
+                command=command.action.value, outcome=result.outcome.value,
+                reason=result.reason or None,
+            )  # fmt: skip
+            for ticket in completion.tickets:
+                if isinstance(ticket, asyncio.Future) and not ticket.done():
+                    ticket.set_result(result)
+            self._observer.command_completed(completion.drive, command, result)
+
+    def _defer_reply(self, drive: DrivePlan, reply: Reply, at: float) -> None:
+        self._deferred.append(partial(self._observer.drive_replied, drive, reply, at))
+
+    def _flush_deferred(self) -> None:
+        if self._deferred:
+            deferred, self._deferred = self._deferred, []
+            for call in deferred:
+                call()
+
+    def _record(self, kind: str, data: bytes) -> None:
+        self.recent_frames.append((kind, data.hex(" ")))
+
+    def _count_request(self, step: Step) -> None:
+        stats = self.stats
+        stats.requests += 1
+        if step.pending is not None and step.pending.attempts:
+            stats.retries += 1
+        if not step.exchange.expects_reply:
+            stats.broadcasts += 1
+        if step.slot is not None:
+            stats.drives[step.slot.name].requests += 1
+
+    def _count_reply(self, step: Step, reply: Reply, latency: float) -> None:
+        stats = self.stats
+        stats.replies += 1
+        stats.latency.observe(latency)
+        if step.slot is not None:
+            drive = stats.drives[step.slot.name]
+            drive.replies += 1
+            drive.last_latency_s = latency
+            if reply.error is not None:
+                drive.refused += 1
+
+    def _count_failure(self, step: Step) -> None:
+        self.stats.timeouts += 1
+        self._record("timeout", step.exchange.request)
+        if step.slot is not None:
+            self.stats.drives[step.slot.name].timeouts += 1
+            if step.kind is StepKind.POLL:
+                self._log.debug("poll.timed_out", address=step.slot.address)
+
+    def _timeout_reason(self, step: Step) -> str:
+        target = step.slot.name if step.slot else "the line"
+        tries = 1 + (step.pending.attempts if step.pending else 0)
+        return f"no valid reply from {target} after {tries} attempt(s)"
+
+
+class Drive:
+    """A handle on one drive of a running BusMaster. Every method returns one result."""
+
+    __slots__ = ("_master", "plan")
+
+    def __init__(self, master: BusMaster, plan: DrivePlan) -> None:
+        self._master = master
+        self.plan = plan
+
+    @property
+    def name(self) -> str:
+        """The drive's configured name."""
+        return self.plan.name
+
+    async def execute(self, command: Command) -> CommandResult:
+        """Carry out any command."""
+        return await self._master.execute(self.plan.name, command)
+
+    def reference_pct(self, frequency_hz: float | None, reference_pct: float | None) -> (
+        float | None
+    ):  # fmt: skip
+        """A reference in % of nominal frequency from whichever of the two is given."""
+        if frequency_hz is not None:
+            return frequency_hz / self.plan.nominal_frequency_hz * 100.0
+        return reference_pct
+
+    async def start(
+        self, *, frequency_hz: float | None = None, reference_pct: float | None = None,
+        actor: str = "",
+    ) -> CommandResult:  # fmt: skip
+        """Run, optionally at a new reference."""
+        return await self.execute(
+            Command(
+                action=Action.START,
+                reference_pct=self.reference_pct(frequency_hz, reference_pct),
+                actor=actor,
+            )
+        )
+
+    async def set_reference(
+        self, *, frequency_hz: float | None = None, reference_pct: float | None = None,
+        actor: str = "",
+    ) -> CommandResult:  # fmt: skip
+        """Change the reference without changing the motion."""
+        pct = self.reference_pct(frequency_hz, reference_pct)
+        if pct is None:
+            return CommandResult(
+                outcome=Outcome.INVALID, reason="give frequency_hz or reference_pct"
+            )
+        return await self.execute(
+            Command(action=Action.SET_REFERENCE, reference_pct=pct, actor=actor)
+        )
+
+    async def stop(self, *, actor: str = "") -> CommandResult:
+        """Ramp down and stay ready."""
+        return await self.execute(Command(action=Action.STOP, actor=actor))
+
+    async def coast(self, *, actor: str = "") -> CommandResult:
+        """Switch the output off; the motor free-wheels."""
+        return await self.execute(Command(action=Action.COAST, actor=actor))
+
+    async def quick_stop(self, *, actor: str = "") -> CommandResult:
+        """Ramp down on the quick-stop ramp."""
+        return await self.execute(Command(action=Action.QUICK_STOP, actor=actor))
+
+    async def reset(self, *, actor: str = "") -> CommandResult:
+        """Acknowledge a trip (a pulse; the motor does not restart by itself)."""
+        return await self.execute(Command(action=Action.RESET, actor=actor))
+
+    async def forward(self, *, actor: str = "") -> CommandResult:
+        """Turn forward."""
+        return await self.execute(Command(action=Action.FORWARD, actor=actor))
+
+    async def reverse(self, *, actor: str = "") -> CommandResult:
+        """Turn in reverse."""
+        return await self.execute(Command(action=Action.REVERSE, actor=actor))
+
+    async def jog(self, *, actor: str = "") -> CommandResult:
+        """Run at the jog speed."""
+        return await self.execute(Command(action=Action.JOG, actor=actor))
+
+    async def read(self, parameter: str, *, index: int = 0, actor: str = "") -> CommandResult:
+        """Read a parameter; the value is in ``result.value``."""
+        return await self.execute(
+            Command(action=Action.READ, parameter=parameter, index=index, actor=actor)
+        )
+
+    async def write(
+        self, parameter: str, value: float, *, index: int = 0, persist: bool = False,
+        actor: str = "",
+    ) -> CommandResult:  # fmt: skip
+        """Write a parameter (``persist``: to non-volatile memory too)."""
+        return await self.execute(
+            Command(
+                action=Action.WRITE, parameter=parameter, index=index, value=value,
+                persist=persist, actor=actor,
+            )
+        )  # fmt: skip

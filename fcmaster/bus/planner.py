@@ -1,0 +1,511 @@
+"""What goes on the wire next: the pure, synchronous scheduler of one half-duplex line.
+
+Theory of operation
+-------------------
+The planner owns the line's queues and each drive's bus-side state; the BusMaster asks it
+for a :class:`Step`, carries the step out, and reports back with :meth:`Planner.on_reply`
+or :meth:`Planner.on_failure`. Time is always an argument, so every rule here is tested
+without asyncio. Order of service (DESIGN.md):
+
+1. urgent commands (stop, coast, quick stop), oldest first;
+2. other commands and parameter access, in arrival order;
+3. a probe of a demoted drive, when its slow probe timer is due;
+4. the idle poll, round-robin over the drives that are not demoted.
+
+Commands are retried up to ``retries`` times, each retry going back to the head of its
+queue so an urgent stop can still come in between. Idle polls are never retried: a failed
+poll counts toward demotion and the round moves on, so a dead drive costs one timeout per
+round until it is demoted, then one per probe interval.
+
+Control state. A ``control: bus`` drive carries its commanded :class:`ControlIntent` in
+every exchange, which keeps the drive's control-word watchdog fed. Before the master knows
+the drive's state it sends no command (intent None) unless ``on_start: stop``; the first
+good reply is *adopted*: a running drive is commanded to keep running at its present output
+and direction, a stopped one to stay stopped. A drive that returns from being demoted is
+adopted again unless the last command was a stop, so a drive that comes back is never
+started by the master on its own. A trip (status fault rising) turns the intent into a stop,
+so a later reset does not restart the motor; a new start is needed.
+
+Every command ends exactly once, reported as a :class:`Completion`: the master resolves
+the caller's future from it. A stop supersedes motion commands of the same drive that are
+still queued (they end ``cancelled``); a newer reference coalesces into a queued one (both
+end with the newer one's result).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+from dataclasses import dataclass, field
+from enum import Enum
+
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.errors import UsageError
+from fcmaster.protocol.codec import DriveCodec, Exchange, ParameterKey, Reply
+from fcmaster.protocol.drive import ControlIntent, Motion
+
+_STOPPING = (Motion.STOP, Motion.COAST, Motion.QUICK_STOP)
+_MOTION_ACTIONS = frozenset(
+    (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE)
+)
+# Actions that change only part of the commanded state, so the rest must be known first.
+_RELATIVE_ACTIONS = frozenset((Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE, Action.RESET))
+
+
+class StepKind(Enum):
+    """Why an exchange is on the wire."""
+
+    COMMAND = "command"
+    POLL = "poll"
+    PROBE = "probe"
+
+
+@dataclass(slots=True, eq=False)
+class DriveSlot:
+    """The bus-side state of one drive."""
+
+    plan: DrivePlan
+    sequence: tuple[ParameterKey | None, ...]
+    intent: ControlIntent | None = None  # what every exchange commands; None: nothing
+    online: bool | None = None  # None until the first reply or demotion
+    failures: int = 0  # consecutive
+    next_probe_at: float = 0.0
+    cursor: int = 0
+    urgent_reads: deque[ParameterKey] = field(default_factory=deque)
+    fault: bool = False
+    warning: bool = False
+
+    @property
+    def name(self) -> str:
+        """The drive's configured name."""
+        return self.plan.name
+
+    @property
+    def address(self) -> int:
+        """The drive's bus address."""
+        return self.plan.address
+
+
+@dataclass(slots=True, eq=False)
+class Pending:
+    """A command waiting for the line, with every ticket its result answers."""
+
+    command: Command
+    slot: DriveSlot | None  # None: a broadcast to the line
+    tickets: list[object]
+    attempts: int = 0
+    part: int = 0  # which of the command's exchanges is next
+    intent: ControlIntent | None = None  # the intent this command sends, once built
+
+
+@dataclass(slots=True, frozen=True)
+class Step:
+    """One exchange to carry out."""
+
+    kind: StepKind
+    exchange: Exchange
+    slot: DriveSlot | None
+    pending: Pending | None = None
+
+
+@dataclass(slots=True, frozen=True)
+class Completion:
+    """A command that has ended: resolve every ticket with ``result``."""
+
+    tickets: tuple[object, ...]
+    command: Command
+    drive: str
+    result: CommandResult
+
+
+@dataclass(slots=True, frozen=True)
+class Transition:
+    """A drive that went online or offline."""
+
+    drive: DrivePlan
+    online: bool
+
+
+@dataclass(slots=True)
+class Report:
+    """What one reply or failure changed, for the master to pass on."""
+
+    completions: list[Completion] = field(default_factory=list)
+    transitions: list[Transition] = field(default_factory=list)
+
+
+class Planner:
+    """The scheduler of one line. Synchronous, deterministic, clock-free."""
+
+    def __init__(self, plan: LinePlan, codec: DriveCodec) -> None:
+        self.plan = plan
+        self.codec = codec
+        self.slots: list[DriveSlot] = []
+        self._by_name: dict[str, DriveSlot] = {}
+        for drive in plan.drives:
+            monitor = (
+                codec.default_monitor()
+                if drive.monitor is None
+                else tuple(codec.parameter(p) for p in drive.monitor)
+            )
+            slot = DriveSlot(plan=drive, sequence=codec.poll_sequence(monitor))
+            if drive.control and drive.on_start is OnStart.STOP:
+                slot.intent = ControlIntent(Motion.STOP)
+            self.slots.append(slot)
+            self._by_name[drive.name] = slot
+        self._urgent: deque[Pending] = deque()
+        self._normal: deque[Pending] = deque()
+        self._next_poll = 0
+
+    # -- commands in -------------------------------------------------------------------
+
+    def slot(self, name: str) -> DriveSlot:
+        """The drive called ``name``; KeyError if the line has none."""
+        return self._by_name[name]
+
+    def submit(self, name: str | None, command: Command, ticket: object) -> list[Completion]:
+        """Queue ``command`` for drive ``name`` (None: broadcast to the line).
+
+        Returns the commands this submission ended at once: this one when it cannot go on
+        the wire (invalid, not allowed), or queued motion commands a stop supersedes.
+        """
+        slot = None if name is None else self._by_name.get(name)
+        refusal = self._refusal(name, slot, command)
+        if refusal is not None:
+            return [Completion((ticket,), command, name or "*", refusal)]
+        pending = Pending(command, slot, [ticket])
+        if command.action.is_urgent:
+            self._urgent.append(pending)
+            return self._supersede(slot, command)
+        if command.action is not Action.SET_REFERENCE or not self._coalesce(pending):
+            self._normal.append(pending)
+        return []
+
+    def _refusal(
+        self, name: str | None, slot: DriveSlot | None, command: Command
+    ) -> CommandResult | None:
+        action = command.action
+        if name is not None and slot is None:
+            return _result(Outcome.INVALID, f"no drive called {name!r} on {self.plan.name}")
+        targets = [slot] if slot is not None else self.slots
+        if slot is None and not action.is_control:
+            return _result(Outcome.INVALID, "only control actions can be broadcast")
+        if action.is_control:
+            monitor_only = [s.name for s in targets if not s.plan.control]
+            if monitor_only:
+                return _result(
+                    Outcome.NOT_ALLOWED,
+                    f"{', '.join(monitor_only)} is monitor-only (not configured control: bus)",
+                )
+        if command.reference_pct is not None:
+            for target in targets:
+                reason = _beyond_limits(target.plan, command.reference_pct)
+                if reason:
+                    return _result(Outcome.NOT_ALLOWED, reason)
+        if action in (Action.READ, Action.WRITE) and slot is not None:
+            try:
+                self._build_access(slot, command)
+            except UsageError as exc:
+                return _result(Outcome.INVALID, str(exc))
+        return None
+
+    def _supersede(self, slot: DriveSlot | None, command: Command) -> list[Completion]:
+        """A stop makes queued motion commands for the same drive moot.
+
+        A command already on its way (attempted at least once) is left to finish.
+        """
+        ended: list[Completion] = []
+        keep: deque[Pending] = deque()
+        for pending in self._normal:
+            if (
+                pending.command.action in _MOTION_ACTIONS
+                and pending.attempts == 0
+                and pending.part == 0
+                and (slot is None or pending.slot is slot or pending.slot is None)
+            ):
+                result = _result(Outcome.CANCELLED, f"superseded by {command.action}")
+                ended.append(_completion(pending, result))
+            else:
+                keep.append(pending)
+        self._normal = keep
+        return ended
+
+    def _coalesce(self, pending: Pending) -> bool:
+        for queued in self._normal:
+            if (
+                queued.command.action is Action.SET_REFERENCE
+                and queued.slot is pending.slot
+                and queued.attempts == 0
+            ):
+                queued.command = pending.command
+                queued.tickets.extend(pending.tickets)
+                return True
+        return False
+
+    def cancel_all(self, reason: str) -> list[Completion]:
+        """End every queued command as cancelled (shutdown, line lost)."""
+        result = _result(Outcome.CANCELLED, reason)
+        ended = [_completion(p, result) for p in (*self._urgent, *self._normal)]
+        self._urgent.clear()
+        self._normal.clear()
+        return ended
+
+    @property
+    def has_commands(self) -> bool:
+        """Whether commands are waiting for the line."""
+        return bool(self._urgent or self._normal)
+
+    # -- what next -----------------------------------------------------------------------
+
+    def next_step(self, now: float) -> Step | None:
+        """The next exchange to carry out; None: nothing to do before :meth:`next_wakeup`."""
+        queue = self._urgent or self._normal
+        if queue:
+            return self._command_step(queue[0])
+        for slot in self.slots:
+            if slot.online is False and slot.next_probe_at <= now:
+                slot.next_probe_at = now + self.plan.probe_interval_s
+                exchange = self.codec.poll(slot.address, _stopping_only(slot.intent), None)
+                return Step(StepKind.PROBE, exchange, slot)
+        count = len(self.slots)
+        for offset in range(count):
+            slot = self.slots[(self._next_poll + offset) % count]
+            if slot.online is not False:
+                self._next_poll = (self._next_poll + offset + 1) % count
+                return Step(StepKind.POLL, self._poll(slot), slot)
+        return None
+
+    def next_wakeup(self, now: float) -> float | None:
+        """When a probe falls due, if nothing else is to do; None: only a command wakes us."""
+        due = [s.next_probe_at for s in self.slots if s.online is False]
+        return min(due) if due else None
+
+    def _poll(self, slot: DriveSlot) -> Exchange:
+        read: ParameterKey | None
+        if slot.urgent_reads:
+            read = slot.urgent_reads.popleft()
+        else:
+            read = slot.sequence[slot.cursor % len(slot.sequence)]
+            slot.cursor += 1
+        return self.codec.poll(slot.address, slot.intent, read)
+
+    def _command_step(self, pending: Pending) -> Step:
+        slot, command = pending.slot, pending.command
+        if command.action.is_control:
+            if (
+                pending.intent is None
+                and slot is not None
+                and slot.intent is None
+                and command.action in _RELATIVE_ACTIONS
+            ):
+                # Learn what the drive is doing before changing part of it.
+                exchange = self.codec.poll(slot.address, None, None)
+                return Step(StepKind.COMMAND, exchange, slot, pending)
+            if pending.intent is None:
+                base = ControlIntent() if slot is None else _current(slot)
+                pending.intent = _apply(base, command)
+            exchanges = self.codec.control(0 if slot is None else slot.address, pending.intent)
+            if command.action.is_urgent:
+                # A stop holds from the moment it is sent, even if no reply confirms it.
+                for target in self._targets(slot):
+                    target.intent = _without_reset(pending.intent)
+            exchange = exchanges[pending.part]
+        else:
+            assert slot is not None  # access commands always name a drive
+            exchange = self._build_access(slot, command)
+        return Step(StepKind.COMMAND, exchange, slot, pending)
+
+    def _build_access(self, slot: DriveSlot, command: Command) -> Exchange:
+        parameter = self.codec.parameter(command.parameter or "")
+        if command.action is Action.READ:
+            return self.codec.read(slot.address, parameter, command.index, slot.intent)
+        if command.value is None:
+            raise UsageError("write needs a value")
+        return self.codec.write(
+            slot.address, parameter, command.index, command.value, slot.intent,
+            persist=command.persist,
+        )  # fmt: skip
+
+    def _targets(self, slot: DriveSlot | None) -> list[DriveSlot]:
+        return [slot] if slot is not None else [s for s in self.slots if s.plan.control]
+
+    # -- what came back ------------------------------------------------------------------
+
+    def on_sent(self, step: Step, now: float) -> Report:
+        """A step that expects no reply (broadcast, reset without answer) went out."""
+        report = Report()
+        if step.pending is not None:
+            self._advance(step.pending, report, None)
+        return report
+
+    def on_reply(self, step: Step, reply: Reply, now: float) -> Report:
+        """A valid reply to ``step`` arrived."""
+        report = Report()
+        slot = step.slot
+        if slot is not None:
+            self._heard(slot, reply, report)
+        if step.pending is not None:
+            self._advance(step.pending, report, reply)
+        return report
+
+    def on_failure(self, step: Step, now: float, reason: str) -> Report:
+        """No valid reply to ``step`` before its deadline."""
+        report = Report()
+        slot = step.slot
+        if step.kind is StepKind.COMMAND and step.pending is not None:
+            pending = step.pending
+            pending.attempts += 1
+            if pending.attempts <= self.plan.retries:
+                return report  # stays at the head of its queue: retried next
+            self._finish(pending, report, _result(Outcome.TIMEOUT, reason))
+        if slot is not None:
+            slot.failures += 1
+            if slot.online is not False and slot.failures >= self.plan.offline_after:
+                slot.online = False
+                slot.next_probe_at = now + self.plan.probe_interval_s
+                slot.urgent_reads.clear()
+                if slot.intent is not None and slot.intent.motion not in _STOPPING:
+                    slot.intent = None  # adopt again when it returns
+                report.transitions.append(Transition(slot.plan, online=False))
+        return report
+
+    def _heard(self, slot: DriveSlot, reply: Reply, report: Report) -> None:
+        slot.failures = 0
+        if slot.online is not True:
+            slot.online = True
+            report.transitions.append(Transition(slot.plan, online=True))
+        status = reply.status
+        if status is None:
+            return
+        if slot.plan.control and slot.intent is None:
+            slot.intent = _adopted(slot.plan, reply)
+        alarms_changed = status.fault != slot.fault
+        warnings_changed = status.warning != slot.warning
+        if status.fault and not slot.fault and slot.intent is not None:
+            slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP)
+        slot.fault, slot.warning = status.fault, status.warning
+        if alarms_changed or warnings_changed:
+            for key in self.codec.condition_parameters(
+                alarms=alarms_changed, warnings=warnings_changed
+            ):
+                if key not in slot.urgent_reads:
+                    slot.urgent_reads.append(key)
+
+    def _advance(self, pending: Pending, report: Report, reply: Reply | None) -> None:
+        command = pending.command
+        if reply is not None and reply.error is not None:
+            self._finish(
+                pending, report,
+                CommandResult(
+                    outcome=Outcome.REFUSED, error=reply.error,
+                    reason=f"the drive refused: {reply.error.text} (error {reply.error.code})",
+                ),
+            )  # fmt: skip
+            return
+        if command.action.is_control:
+            if pending.intent is None:
+                pending.attempts = 0  # that was the state-learning poll; now the command
+                return
+            slot = pending.slot
+            pending.part += 1
+            total = len(self.codec.control(0 if slot is None else slot.address, pending.intent))
+            if pending.part < total:
+                pending.attempts = 0
+                return
+            for target in self._targets(slot):
+                target.intent = _without_reset(pending.intent)
+            if reply is not None and reply.status and not reply.status.accepts_bus_control:
+                self._finish(
+                    pending, report,
+                    _result(Outcome.REFUSED, "the drive is in local operation and ignores "
+                            "bus commands (status word: no bus control)"),
+                )  # fmt: skip
+                return
+            self._finish(pending, report, _result(Outcome.DONE, ""))
+            return
+        value = None if reply is None else reply.value
+        self._finish(pending, report, CommandResult(outcome=Outcome.DONE, value=value))
+
+    def _finish(self, pending: Pending, report: Report, result: CommandResult) -> None:
+        for queue in (self._urgent, self._normal):
+            if queue and queue[0] is pending:
+                queue.popleft()
+                break
+        else:  # pragma: no cover - a step always serves the head of a queue
+            raise AssertionError("finished a command that was not at the head of its queue")
+        report.completions.append(_completion(pending, result))
+
+
+def _completion(pending: Pending, result: CommandResult) -> Completion:
+    name = pending.slot.name if pending.slot else "*"
+    return Completion(tuple(pending.tickets), pending.command, name, result)
+
+
+def _result(outcome: Outcome, reason: str) -> CommandResult:
+    return CommandResult(outcome=outcome, reason=reason)
+
+
+def _beyond_limits(drive: DrivePlan, reference_pct: float) -> str:
+    frequency = reference_pct * drive.nominal_frequency_hz / 100.0
+    if abs(frequency) > drive.max_frequency_hz + 1e-9:
+        return (
+            f"{frequency:g} Hz is beyond {drive.name}'s configured limit of "
+            f"{drive.max_frequency_hz:g} Hz"
+        )
+    if frequency and abs(frequency) < drive.min_frequency_hz - 1e-9:
+        return (
+            f"{frequency:g} Hz is below {drive.name}'s configured minimum of "
+            f"{drive.min_frequency_hz:g} Hz"
+        )
+    return ""
+
+
+def _current(slot: DriveSlot) -> ControlIntent:
+    return slot.intent if slot.intent is not None else ControlIntent(Motion.STOP)
+
+
+def _without_reset(intent: ControlIntent) -> ControlIntent:
+    return dataclasses.replace(intent, reset=False) if intent.reset else intent
+
+
+def _stopping_only(intent: ControlIntent | None) -> ControlIntent | None:
+    """A probe keeps commanding a stop but never a motion, so a returning drive is safe."""
+    return intent if intent is not None and intent.motion in _STOPPING else None
+
+
+def _apply(intent: ControlIntent, command: Command) -> ControlIntent:
+    action = command.action
+    reference = intent.reference_pct if command.reference_pct is None else command.reference_pct
+    match action:
+        case Action.START:
+            return ControlIntent(Motion.RUN, intent.reverse, reference)
+        case Action.STOP:
+            return ControlIntent(Motion.STOP, intent.reverse, reference)
+        case Action.COAST:
+            return ControlIntent(Motion.COAST, intent.reverse, reference)
+        case Action.QUICK_STOP:
+            return ControlIntent(Motion.QUICK_STOP, intent.reverse, reference)
+        case Action.JOG:
+            return ControlIntent(Motion.JOG, intent.reverse, reference)
+        case Action.FORWARD:
+            return ControlIntent(intent.motion, False, reference)
+        case Action.REVERSE:
+            return ControlIntent(intent.motion, True, reference)
+        case Action.SET_REFERENCE:
+            return ControlIntent(intent.motion, intent.reverse, reference)
+        case Action.RESET:
+            return ControlIntent(intent.motion, intent.reverse, reference, reset=True)
+    raise AssertionError(f"not a control action: {action}")  # pragma: no cover
+
+
+def _adopted(drive: DrivePlan, reply: Reply) -> ControlIntent:
+    """The intent that keeps a drive doing what it does now."""
+    status = reply.status
+    assert status is not None
+    if not status.running:
+        return ControlIntent(Motion.STOP)
+    pct = reply.output_pct
+    if pct is None and reply.output_frequency_hz is not None and drive.nominal_frequency_hz:
+        pct = reply.output_frequency_hz / drive.nominal_frequency_hz * 100.0
+    return ControlIntent(Motion.RUN, bool(status.reverse), abs(pct or 0.0))
