@@ -47,6 +47,7 @@ from fcmaster.errors import (
     UnexpectedReply,
 )
 from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
+from fcmaster.protocol.drive import ControlIntent
 from fcmaster.protocol.framing import Frame, SkipReason
 
 log = structlog.get_logger("fcmaster.bus")
@@ -58,8 +59,13 @@ BACKOFF_MAX_S = 30.0
 class BusObserver(Protocol):
     """Where a BusMaster reports what it learns. Calls must be quick and never block."""
 
-    def drive_replied(self, drive: DrivePlan, reply: Reply, at: float) -> None:
-        """A valid reply from ``drive`` arrived at monotonic time ``at``."""
+    def drive_replied(
+        self, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
+    ) -> None:
+        """A valid reply from ``drive`` arrived at monotonic time ``at``.
+
+        ``commanded`` is what the master now commands the drive (None: nothing).
+        """
 
     def drive_availability(self, drive: DrivePlan, online: bool, at: float) -> None:
         """``drive`` came online or was demoted."""
@@ -72,7 +78,9 @@ class BusObserver(Protocol):
 
 
 class _NullObserver:
-    def drive_replied(self, drive: DrivePlan, reply: Reply, at: float) -> None:
+    def drive_replied(
+        self, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
+    ) -> None:
         pass
 
     def drive_availability(self, drive: DrivePlan, online: bool, at: float) -> None:
@@ -269,8 +277,11 @@ class BusMaster:
             stats.busy_s += ready_at - written_at
             self._count_reply(step, reply, now - written_at)
             self._handle(planner.on_reply(step, reply, now))
-            if step.slot is not None:
-                self._defer_reply(step.slot.plan, reply, now)
+            slot = step.slot
+            if slot is not None:
+                self._deferred.append(
+                    partial(self._observer.drive_replied, slot.plan, reply, now, slot.intent)
+                )
 
     async def _receive(self, exchange: Exchange, deadline: float) -> Reply | None:
         """Read until a frame answers ``exchange``; None at the deadline."""
@@ -369,9 +380,6 @@ class BusMaster:
                 if isinstance(ticket, asyncio.Future) and not ticket.done():
                     ticket.set_result(result)
             self._observer.command_completed(completion.drive, command, result)
-
-    def _defer_reply(self, drive: DrivePlan, reply: Reply, at: float) -> None:
-        self._deferred.append(partial(self._observer.drive_replied, drive, reply, at))
 
     def _flush_deferred(self) -> None:
         if self._deferred:
