@@ -60,36 +60,40 @@ class BusObserver(Protocol):
     """Where a BusMaster reports what it learns. Calls must be quick and never block."""
 
     def drive_replied(
-        self, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
+        self, bus: str, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
     ) -> None:
-        """A valid reply from ``drive`` arrived at monotonic time ``at``.
+        """A valid reply from ``drive`` on ``bus`` arrived at monotonic time ``at``.
 
         ``commanded`` is what the master now commands the drive (None: nothing).
         """
 
-    def drive_availability(self, drive: DrivePlan, online: bool, at: float) -> None:
+    def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
         """``drive`` came online or was demoted."""
 
     def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
         """The line's port opened or was lost."""
 
-    def command_completed(self, drive: str, command: Command, result: CommandResult) -> None:
-        """A command ended."""
+    def command_completed(
+        self, bus: str, drive: str, command: Command, result: CommandResult
+    ) -> None:
+        """A command for ``drive`` ("*": the whole line) ended."""
 
 
 class _NullObserver:
     def drive_replied(
-        self, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
+        self, bus: str, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
     ) -> None:
         pass
 
-    def drive_availability(self, drive: DrivePlan, online: bool, at: float) -> None:
+    def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
         pass
 
     def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
         pass
 
-    def command_completed(self, drive: str, command: Command, result: CommandResult) -> None:
+    def command_completed(
+        self, bus: str, drive: str, command: Command, result: CommandResult
+    ) -> None:
         pass
 
 
@@ -221,7 +225,7 @@ class BusMaster:
         for slot in self.planner.slots:
             if slot.online:
                 slot.online = None
-                self._observer.drive_availability(slot.plan, False, now)
+                self._observer.drive_availability(self.plan.name, slot.plan, False, now)
         self._observer.line_availability(self.plan.name, False, reason, now)
 
     async def _serve(self) -> None:
@@ -280,7 +284,14 @@ class BusMaster:
             slot = step.slot
             if slot is not None:
                 self._deferred.append(
-                    partial(self._observer.drive_replied, slot.plan, reply, now, slot.intent)
+                    partial(
+                        self._observer.drive_replied,
+                        self.plan.name,
+                        slot.plan,
+                        reply,
+                        now,
+                        slot.intent,
+                    )  # fmt: skip
                 )
 
     async def _receive(self, exchange: Exchange, deadline: float) -> Reply | None:
@@ -365,7 +376,9 @@ class BusMaster:
                     "drive.went_offline", drive=drive.name, address=drive.address,
                     recent_frames=list(self.recent_frames),
                 )  # fmt: skip
-            self._deferred.append(partial(self._observer.drive_availability, drive, online, now))
+            self._deferred.append(
+                partial(self._observer.drive_availability, self.plan.name, drive, online, now)
+            )
 
     def _resolve(self, completions: list[Completion]) -> None:
         for completion in completions:
@@ -379,7 +392,7 @@ class BusMaster:
             for ticket in completion.tickets:
                 if isinstance(ticket, asyncio.Future) and not ticket.done():
                     ticket.set_result(result)
-            self._observer.command_completed(completion.drive, command, result)
+            self._observer.command_completed(self.plan.name, completion.drive, command, result)
 
     def _flush_deferred(self) -> None:
         if self._deferred:
