@@ -291,7 +291,7 @@ class BusMaster:
                         reply,
                         now,
                         slot.intent,
-                    )  # fmt: skip
+                    )
                 )
 
     async def _receive(self, exchange: Exchange, deadline: float) -> Reply | None:
