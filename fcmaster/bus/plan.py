@@ -52,6 +52,8 @@ class LinePlan:
     probe_interval_s: float = 5.0  # how often a demoted drive is probed
     echo: bool = False  # the adapter hears its own transmission
     rs485: bool = False  # kernel RS-485 mode (RTS drives the transmitter)
+    terminator: str = "cr"  # mitsubishi: none | cr | crlf, as the drives' Pr.124
+    wait_time_ms: int | None = None  # mitsubishi: None = the waiting time travels in requests
     drives: tuple[DrivePlan, ...] = field(default=())
 
     @property

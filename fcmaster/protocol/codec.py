@@ -122,6 +122,7 @@ class DriveCodec(Protocol):
     """Builds a vendor's exchanges and reads its replies. Pure: no I/O, no clock."""
 
     protocol: str
+    addresses: range  # the drive addresses this protocol (and address format) can reach
 
     def new_framer(self) -> Framer:
         """A framer for the replies of this protocol."""

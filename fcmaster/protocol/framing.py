@@ -47,8 +47,11 @@ class Framer(Protocol):
     def next_frame(self) -> Frame | Skipped | None:
         """Return the next frame or skipped piece, or None when more bytes are needed."""
 
-    def reset(self) -> bytes:
-        """Drop an unfinished frame (after an inter-character gap); return its bytes."""
+    def reset(self) -> None:
+        """Mark an inter-character gap: an unfinished frame begun before it is given up.
+
+        Its bytes come out of :meth:`next_frame` as skipped, reason ``gap``.
+        """
 
     @property
     def buffered(self) -> int:

@@ -105,6 +105,7 @@ class FcCodec:
 
     def __init__(self, address_format: AddressFormat = AddressFormat.FORMAT_126) -> None:
         self.address_format = address_format
+        self.addresses = range(1, 127 if address_format is AddressFormat.FORMAT_126 else 32)
 
     def new_framer(self) -> FcFramer:
         """A framer for FC replies."""
@@ -202,9 +203,11 @@ class FcCodec:
         if ak == ResponseAk.ERROR:
             code = telegram.pwe & 0xFFFF
             return Reply(
-                address=exchange.address, status=status, output_pct=output_pct,
+                address=exchange.address,
+                status=status,
+                output_pct=output_pct,
                 error=DriveError(code, error_text(code)),
-            )  # fmt: skip
+            )
         if telegram.pnu != exchange.parameter.code:
             raise UnexpectedReply(
                 f"reply for parameter {format_parameter(telegram.pnu)}, "
@@ -218,9 +221,12 @@ class FcCodec:
             active = tuple(Condition(code, text) for code, text in decode(value.raw))
             conditions = ConditionReport(kind=kind, source=value.parameter.name, active=active)
         return Reply(
-            address=exchange.address, status=status, output_pct=output_pct,
-            value=value, conditions=conditions,
-        )  # fmt: skip
+            address=exchange.address,
+            status=status,
+            output_pct=output_pct,
+            value=value,
+            conditions=conditions,
+        )
 
     def _parameter(
         self,
@@ -235,9 +241,14 @@ class FcCodec:
     ) -> Exchange:
         ctw, ref = _pcd(intent)
         telegram = Telegram(
-            address=address, address_format=self.address_format, pcd1=ctw, pcd2=ref,
-            pke=make_pke(ak, parameter.code), ind=ind, pwe=pwe,
-        )  # fmt: skip
+            address=address,
+            address_format=self.address_format,
+            pcd1=ctw,
+            pcd2=ref,
+            pke=make_pke(ak, parameter.code),
+            ind=ind,
+            pwe=pwe,
+        )
         return Exchange(
             address=address,
             request=encode_telegram(telegram),
@@ -267,13 +278,19 @@ def _value(exchange: Exchange, telegram: Telegram, ak: int, frame: bytes) -> Par
     spec = lookup(telegram.pnu)
     if telegram.text is not None:
         return ParameterValue(
-            parameter=exchange.parameter, index=exchange.index, raw=None,
-            value=telegram.text.decode("latin-1").rstrip("\x00 "), unit="",
-        )  # fmt: skip
+            parameter=exchange.parameter,
+            index=exchange.index,
+            raw=None,
+            value=telegram.text.decode("latin-1").rstrip("\x00 "),
+            unit="",
+        )
     if ak not in (ResponseAk.VALUE_WORD, ResponseAk.VALUE_DWORD) or spec.data_type is DataType.TEXT:
         raise MalformedReply(f"AK {ak} does not carry a value", raw=frame)
     raw = spec.raw_from_pwe(telegram.pwe, double_word=ak == ResponseAk.VALUE_DWORD)
     return ParameterValue(
-        parameter=exchange.parameter, index=exchange.index, raw=raw,
-        value=spec.to_value(raw), unit=spec.unit,
-    )  # fmt: skip
+        parameter=exchange.parameter,
+        index=exchange.index,
+        raw=raw,
+        value=spec.to_value(raw),
+        unit=spec.unit,
+    )

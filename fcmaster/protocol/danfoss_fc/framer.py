@@ -6,9 +6,9 @@ back at once, or a candidate telegram starting with STX. A candidate is judged b
 are in, by its BCC. A rejected candidate gives up only its STX byte and the rest is
 scanned again, so a real telegram that starts inside noise or inside a broken candidate is
 still found. Nothing here knows about time: when the bus sees an inter-character gap it
-calls :meth:`FcFramer.reset`, and candidates that started before the gap and are still
-incomplete are given up the same way (reason ``gap``) instead of waiting for bytes that
-would only be glued on from a later telegram.
+calls :meth:`FcFramer.reset`, and candidates that started before the gap but did not end
+before it are given up the same way (reason ``gap``) instead of being completed with bytes
+of a later telegram, whether those bytes are fed before or after the next call.
 """
 
 from __future__ import annotations
@@ -50,7 +50,10 @@ class FcFramer:
         if buf[0] != STX:
             start = buf.find(STX)
             return self._skip(len(buf) if start < 0 else start, SkipReason.NOISE)
-        if len(buf) < 2:
+        # A candidate begun before a gap must also end before it: bytes fed after reset()
+        # belong to a later telegram, even when they arrive before the next call here.
+        end = self._horizon or len(buf)
+        if end < 2:
             return self._skip(1, SkipReason.GAP) if self._horizon else None
         lge = buf[1]
         if lge != LGE_PROCESS and lge < LGE_TEXT_BASE:
@@ -58,7 +61,7 @@ class FcFramer:
         if lge > self._max_lge:
             return self._skip(1, SkipReason.OVERFLOW)
         total = lge + 2
-        if len(buf) < total:
+        if end < total:
             return self._skip(1, SkipReason.GAP) if self._horizon else None
         frame = bytes(buf[:total])
         if bcc(frame) != 0:

@@ -17,6 +17,7 @@ from fcmaster.errors import MalformedReply, UsageError
 from fcmaster.protocol.danfoss_fc.telegram import RequestAk
 
 MAX_PNU: Final = 0xFFF
+_N2_100_PCT: Final = 0x4000  # N2 standardised value (§7.1, data type 33)
 _NOTATION = re.compile(r"^\s*(\d{1,2})-(\d{2})\s*$")
 
 
@@ -57,7 +58,10 @@ def parse_parameter(text: str) -> int:
         group, number = int(match[1]), int(match[2])
         pnu = 100 * group + number
     elif text.strip().isdigit():
-        pnu = int(text)
+        try:
+            pnu = int(text)
+        except ValueError:  # isdigit() passes "²"; int() refuses more than 4300 digits
+            raise UsageError(f"parameter {text[:12]!r} is not a PNU (0-4095)") from None
     else:
         raise UsageError(f"parameter {text!r} is not written like 16-13")
     if pnu > MAX_PNU:
@@ -123,6 +127,9 @@ class ParameterSpec:
         else:
             bits, signed = _WIDTH[self.data_type]
         raw = pwe & ((1 << bits) - 1)
+        if bits == 8 and pwe & 0xFF00:
+            # An 8-bit value with bits set above it is not one: refuse rather than mask.
+            raise MalformedReply(f"{self.number}: 0x{pwe & 0xFFFF:04X} does not fit in 8 bits")
         if signed and raw >> (bits - 1):
             raw -= 1 << bits
         return raw
@@ -142,21 +149,38 @@ class ParameterSpec:
 
     def to_value(self, raw: int) -> float:
         """Raw integer → engineering value in ``unit``."""
+        if self.data_type is DataType.N2:  # 0x4000 = 100 %, whatever the conversion index
+            return raw * 100.0 / _N2_100_PCT
         exponent = self.exponent
         return raw * 10.0**exponent if exponent >= 0 else raw / 10.0**-exponent
 
     def to_raw(self, value: float) -> int:
         """Engineering value in ``unit`` → raw integer, rounded to the parameter's resolution."""
+        if self.data_type is DataType.N2:
+            return round(value * _N2_100_PCT / 100.0)
         exponent = self.exponent
         return round(value / 10.0**exponent if exponent >= 0 else value * 10.0**-exponent)
 
 
-def _p(number: str, name: str, data_type: DataType, conversion: int = 0, unit: str = "", *,
-       writable: bool = False, array_length: int = 0) -> ParameterSpec:  # fmt: skip
+def _p(
+    number: str,
+    name: str,
+    data_type: DataType,
+    conversion: int = 0,
+    unit: str = "",
+    *,
+    writable: bool = False,
+    array_length: int = 0,
+) -> ParameterSpec:
     return ParameterSpec(
-        pnu=parse_parameter(number), name=name, data_type=data_type, conversion=conversion,
-        unit=unit, writable=writable, array_length=array_length,
-    )  # fmt: skip
+        pnu=parse_parameter(number),
+        name=name,
+        data_type=data_type,
+        conversion=conversion,
+        unit=unit,
+        writable=writable,
+        array_length=array_length,
+    )
 
 
 _T = DataType

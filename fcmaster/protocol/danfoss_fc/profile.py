@@ -77,10 +77,10 @@ def control_word(intent: ControlIntent) -> int:
         word |= ControlWord.START
     elif motion is Motion.JOG:
         word |= ControlWord.START | ControlWord.JOG
-    elif motion is Motion.COAST:
-        word &= ~ControlWord.NO_COAST
-    elif motion is Motion.QUICK_STOP:
-        word &= ~ControlWord.NO_QUICK_STOP
+    elif motion is Motion.COAST:  # §8.3: 0x0474, bit 6 stays 1
+        word = (word | ControlWord.START) & ~ControlWord.NO_COAST
+    elif motion is Motion.QUICK_STOP:  # §8.3: 0x046C, bit 6 stays 1
+        word = (word | ControlWord.START) & ~ControlWord.NO_QUICK_STOP
     if intent.reverse:
         word |= ControlWord.REVERSE
     if intent.reset:

@@ -199,7 +199,10 @@ def decode_telegram(frame: bytes, *, from_drive: bool) -> Telegram:
         raise MalformedReply(f"LGE {lge} does not match {length} bytes", raw=frame)
     if bcc(frame) != 0:
         raise MalformedReply("BCC does not match", raw=frame)
-    address, address_format = decode_address(frame[2])
+    try:
+        address, address_format = decode_address(frame[2])
+    except MalformedReply as exc:  # keep the frame for the caller's logs, like every error here
+        raise MalformedReply(str(exc), raw=frame) from None
     if lge == LGE_PROCESS:
         _, _, _, pcd1, pcd2, _ = _PROCESS.unpack(frame)
         return Telegram(address=address, address_format=address_format, pcd1=pcd1, pcd2=pcd2)

@@ -1,0 +1,163 @@
+"""The wire discipline of a half-duplex line: one exchange at a time, done right.
+
+:class:`Link` carries one :class:`~fcmaster.protocol.codec.Exchange` at a time over a
+transport: it waits out the pause the protocol asks after the previous reply, drops stale
+input, writes the request as one burst, and reads until the codec's framer yields a frame
+that answers the request or the deadline passes. Frames from another address, malformed
+frames and noise are counted and the read goes on. After a timeout it lets the line drain
+for a reply's length, so a late reply is discarded before the next request instead of
+being taken for its answer. An inter-character gap gives up an unfinished frame.
+
+The BusMaster drives a Link from its planner; the commissioning commands (scan, status,
+read, write, control) drive one directly.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+from fcmaster.bus.plan import LinePlan
+from fcmaster.bus.stats import LineStats
+from fcmaster.bus.transport import Transport
+from fcmaster.clock import Clock
+from fcmaster.errors import MalformedReply, ProtocolError, ReplyTimeout, UnexpectedReply
+from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
+from fcmaster.protocol.framing import Frame, SkipReason
+
+
+class Link:
+    """One exchange at a time on one transport."""
+
+    def __init__(
+        self,
+        plan: LinePlan,
+        *,
+        codec: DriveCodec,
+        transport: Transport,
+        clock: Clock,
+        stats: LineStats | None = None,
+    ) -> None:
+        self.plan = plan
+        self.codec = codec
+        self.transport = transport
+        self.clock = clock
+        self.stats = stats or LineStats()
+        self._recorder: deque[tuple[str, bytes]] = deque(maxlen=32)  # flight recorder
+        self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
+        self.written_at = 0.0  # when the last request was written
+        self._framer = codec.new_framer()
+        self._ready_at = 0.0
+        self._replied_at: float | None = None
+
+    async def send(self, exchange: Exchange) -> None:
+        """Wait for the line to be free, drop stale input, and write the request."""
+        clock, stats = self.clock, self.stats
+        if self._ready_at > clock.now():
+            await clock.sleep_until(self._ready_at)
+        stale = self.transport.discard_input()
+        if stale:
+            stats.late_bytes += len(stale)
+            self._record("discarded", stale)
+        written_at = self.written_at = clock.now()
+        if self._replied_at is not None:
+            stats.turnaround.observe(max(0.0, written_at - self._replied_at - self.pause_s))
+            self._replied_at = None
+        await self.transport.write(exchange.request)
+        self._recorder.append(("tx", exchange.request))
+        stats.requests += 1
+        if not exchange.expects_reply:
+            # Broadcasts and resets get no answer: give the drives time to act on them.
+            stats.broadcasts += 1
+            self._ready_at = (
+                written_at
+                + self.plan.wire_s(len(exchange.request))
+                + self.plan.response_delay_s
+                + self.pause_s
+            )
+            stats.busy_s += self._ready_at - written_at
+
+    async def receive(self, exchange: Exchange) -> Reply | None:
+        """The reply to the request just sent, or None when none came before the deadline."""
+        clock, stats, plan = self.clock, self.stats, self.plan
+        written_at = self.written_at
+        deadline = written_at + plan.reply_timeout(len(exchange.request), exchange.reply_length)
+        reply = await self._read_until(exchange, deadline)
+        now = clock.now()
+        if reply is None:
+            stats.timeouts += 1
+            self._record("timeout", b"")
+            # Let a late reply finish arriving, so it is discarded, not misattributed.
+            self._ready_at = now + plan.wire_s(exchange.reply_length) + plan.gap_s
+        else:
+            stats.replies += 1
+            stats.latency.observe(now - written_at)
+            self._replied_at = now
+            self._ready_at = now + self.pause_s
+        stats.busy_s += self._ready_at - written_at
+        return reply
+
+    async def transact(self, exchange: Exchange) -> Reply | None:
+        """Send ``exchange`` and return its reply (None: no reply expected, or none came)."""
+        await self.send(exchange)
+        if not exchange.expects_reply:
+            return None
+        return await self.receive(exchange)
+
+    async def _read_until(self, exchange: Exchange, deadline: float) -> Reply | None:
+        framer, transport, clock = self._framer, self.transport, self.clock
+        gap_s = self.plan.gap_s
+        last_rx = clock.now()
+        while True:
+            read_deadline = min(deadline, last_rx + gap_s) if framer.buffered else deadline
+            try:
+                chunk = await transport.read(read_deadline)
+            except ReplyTimeout:
+                # A gap (or the deadline): an unfinished frame will not be completed.
+                framer.reset()
+                reply = self._drain(exchange)
+                if reply is not None or read_deadline >= deadline:
+                    return reply
+                continue
+            last_rx = clock.now()
+            framer.feed(chunk)
+            reply = self._drain(exchange)
+            if reply is not None:
+                return reply
+
+    def _drain(self, exchange: Exchange) -> Reply | None:
+        """Hand the framer's pieces to the codec until one answers ``exchange``."""
+        stats, framer = self.stats, self._framer
+        while (piece := framer.next_frame()) is not None:
+            if isinstance(piece, Frame):
+                try:
+                    reply = self.codec.parse(exchange, piece.data)
+                except UnexpectedReply:
+                    stats.unexpected += 1
+                    self._record("unexpected", piece.data)
+                    continue
+                except (MalformedReply, ProtocolError):
+                    stats.malformed += 1
+                    self._record("malformed", piece.data)
+                    continue
+                self._record("rx", piece.data)
+                self._discard_rest()
+                return reply
+            stats.noise_bytes += len(piece.data)
+            if piece.reason is SkipReason.CHECKSUM:
+                stats.checksum_errors += 1
+            self._record(str(piece.reason), piece.data)
+        return None
+
+    def _discard_rest(self) -> None:
+        """Bytes after the reply are late or noise: counted, never taken for a reply."""
+        framer = self._framer
+        framer.reset()
+        while (piece := framer.next_frame()) is not None:
+            self.stats.late_bytes += len(piece.data)
+
+    def _record(self, kind: str, data: bytes) -> None:
+        self._recorder.append((kind, data))
+
+    def recent_frames(self) -> list[str]:
+        """The last frames and events on the line, oldest first, for warnings and errors."""
+        return [f"{kind} {data.hex(' ')}".rstrip() for kind, data in self._recorder]

@@ -1,0 +1,307 @@
+"""Commissioning commands that talk to a port directly, without a daemon.
+
+`scan`, `status`, `read`, `write` and `control` open the port, carry a few exchanges over
+a :class:`~fcmaster.bus.link.Link` — the same wire discipline the daemon uses — and close
+it. `control` goes through the same :class:`~fcmaster.bus.planner.Planner` as the daemon, so
+limits are checked and a running drive is adopted, never jolted.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass, replace
+from typing import Any
+
+from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.link import Link
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.bus.planner import Planner, StepKind
+from fcmaster.bus.serial import SerialTransport
+from fcmaster.clock import MonotonicClock
+from fcmaster.errors import BusError, CommandError, UsageError
+from fcmaster.protocol.codec import DriveCodec, Reply
+from fcmaster.state import FleetState
+
+# Factory line settings per protocol: baud rate, parity, stop bits.
+FACTORY: dict[str, tuple[int, str, int]] = {
+    "danfoss-fc": (9600, "E", 1),  # 8-32 / 8-33 defaults
+    "mitsubishi": (19200, "E", 2),  # Pr.118 / Pr.119 / Pr.120 defaults
+    "enc": (9600, "N", 1),  # F2.14 = 03
+}
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class LineOptions:
+    """The line options every port-opening command takes."""
+
+    port: str
+    protocol: str = "danfoss-fc"
+    baudrate: int | None = None
+    parity: str | None = None
+    stopbits: int | None = None
+    address_format: int = 126
+    timeout_s: float | None = None
+
+    def plan(self, drives: tuple[DrivePlan, ...] = ()) -> LinePlan:
+        """A line plan with the protocol's factory settings where nothing was given."""
+        baudrate, parity, stopbits = FACTORY[self.protocol]
+        return LinePlan(
+            name="cli",
+            port=self.port,
+            protocol=self.protocol,
+            baudrate=self.baudrate or baudrate,
+            parity=self.parity or parity,
+            stopbits=self.stopbits or stopbits,
+            address_format=self.address_format,
+            timeout_s=self.timeout_s,
+            retries=1,
+            drives=drives,
+        )
+
+
+class _Session:
+    """An open port with a Link on it, as an async context manager."""
+
+    def __init__(self, plan: LinePlan) -> None:
+        self.plan = plan
+        self.codec: DriveCodec = codec_for(plan)
+        self.clock = MonotonicClock()
+        self.transport = SerialTransport(
+            plan.port, baudrate=plan.baudrate, parity=plan.parity, stopbits=plan.stopbits
+        )
+        self.link = Link(plan, codec=self.codec, transport=self.transport, clock=self.clock)
+
+    async def __aenter__(self) -> _Session:
+        await self.transport.open()
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.transport.close()
+
+    async def poll(self, address: int, read: Any = None) -> Reply | None:
+        """One monitor-only poll (the drive is never commanded)."""
+        return await self.link.transact(self.codec.poll(address, None, read))
+
+
+def _check_address(codec: DriveCodec, address: int) -> None:
+    if address not in codec.addresses:
+        span = f"{codec.addresses.start}-{codec.addresses.stop - 1}"
+        raise UsageError(f"address {address} is outside {span} for this protocol")
+
+
+async def scan(options: LineOptions, addresses: list[int], *, as_json: bool) -> int:
+    """Poll each address once; list those that answer."""
+    found: list[dict[str, Any]] = []
+    async with _Session(options.plan()) as session:
+        for address in addresses:
+            _check_address(session.codec, address)
+        show_progress = sys.stderr.isatty()
+        for n, address in enumerate(addresses, 1):
+            reply = await session.poll(address)
+            if reply is None:  # one retry: a single lost reply must not hide a drive
+                reply = await session.poll(address)
+            if reply is not None:
+                found.append(_summary(address, reply))
+            if show_progress:
+                _progress(n, len(addresses), address, len(found))
+        if show_progress:
+            print(file=sys.stderr)
+    if as_json:
+        print(json.dumps(found, indent=2))
+    elif found:
+        for entry in found:
+            flags = ", ".join(k for k in ("running", "fault", "warning") if entry[k]) or "stopped"
+            print(f"{entry['address']:>4}  status 0x{entry['status_word']:04X}  {flags}")
+    else:
+        print(f"no drive answered on {options.port} ({len(addresses)} addresses tried)")
+    return 0 if found else 1
+
+
+def _progress(done: int, total: int, address: int, found: int) -> None:
+    width = 30
+    filled = width * done // total
+    bar = "#" * filled + "-" * (width - filled)
+    sys.stderr.write(f"\r[{bar}] {done}/{total}  address {address:<3}  found {found}")
+    sys.stderr.flush()
+
+
+def _summary(address: int, reply: Reply) -> dict[str, Any]:
+    status = reply.status
+    return {
+        "address": address,
+        "status_word": status.word if status else None,
+        "running": bool(status and status.running),
+        "fault": bool(status and status.fault),
+        "warning": bool(status and status.warning),
+        "output_pct": reply.output_pct,
+        "output_frequency_hz": reply.output_frequency_hz,
+    }
+
+
+async def status(options: LineOptions, address: int, *, as_json: bool) -> int:
+    """One drive's decoded state now: status, then every default monitor value."""
+    drive = DrivePlan(name=f"drive-{address}", address=address)
+    plan = options.plan((drive,))
+    fleet = FleetState((plan,), emit=lambda event: None, clock=MonotonicClock())
+    async with _Session(plan) as session:
+        _check_address(session.codec, address)
+        sequence = session.codec.poll_sequence(session.codec.default_monitor())
+        answered = False
+        for read in sequence:
+            reply = await session.poll(address, read)
+            if reply is not None:
+                answered = True
+                fleet.drive_replied(plan.name, drive, reply, session.clock.now(), None)
+        if not answered:
+            raise BusError(f"no reply from address {address} on {options.port}", address=address)
+    state = fleet.get(plan.name, drive.name)
+    assert state is not None
+    out = state.to_json()
+    if as_json:
+        print(json.dumps(out, indent=2))
+    else:
+        for key, value in out.items():
+            if key == "values":
+                for name, v in value.items():
+                    print(f"  {name:<12}{v['value']} {v['unit']}")
+            elif key in ("alarms", "warnings"):
+                texts = ", ".join(f"{c['text']} ({c['code']})" for c in value) or "none"
+                print(f"{key:<20}{texts}")
+            else:
+                print(f"{key:<20}{value}")
+    return 0
+
+
+async def access(
+    options: LineOptions,
+    address: int,
+    parameter: str,
+    *,
+    index: int,
+    value: str | None,
+    persist: bool = False,
+    as_json: bool = False,
+) -> int:
+    """`read` (value None) or `write` one parameter."""
+    async with _Session(options.plan()) as session:
+        codec = session.codec
+        _check_address(codec, address)
+        key = codec.parameter(parameter)
+        if value is None:
+            exchange = codec.read(address, key, index, None)
+        else:
+            exchange = codec.write(address, key, index, _number(value), None, persist=persist)
+        reply = await session.link.transact(exchange)
+    if reply is None:
+        raise BusError(f"no reply from address {address} on {options.port}", address=address)
+    if reply.error is not None:
+        result = CommandResult(
+            outcome=Outcome.REFUSED,
+            error=reply.error,
+            reason=f"the drive refused: {reply.error.text} (error {reply.error.code})",
+        )
+        result.raise_for_outcome()
+    got = reply.value
+    if value is not None:
+        print(f"{key.name} = {got.value if got else value} {got.unit if got else ''}".rstrip())
+        return 0
+    assert got is not None
+    if as_json:
+        print(
+            json.dumps(
+                {
+                    "parameter": key.name,
+                    "index": index,
+                    "value": got.value,
+                    "unit": got.unit,
+                    "raw": got.raw,
+                }
+            )
+        )
+    else:
+        print(f"{got.value} {got.unit}".rstrip())
+    return 0
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise UsageError(f"{text!r} is not a number") from None
+
+
+async def control(
+    options: LineOptions,
+    address: int,
+    action: str,
+    *,
+    frequency_hz: float | None,
+    reference_pct: float | None,
+    nominal_frequency_hz: float,
+    max_frequency_hz: float | None,
+) -> int:
+    """Command one drive through the daemon's planner, so limits and adoption apply."""
+    try:
+        verb = Action(action.replace("-", "_"))
+    except ValueError:
+        raise UsageError(f"unknown action {action!r}") from None
+    if not verb.is_control:
+        raise UsageError(f"{action} is not a control action; use read or write")
+    drive = DrivePlan(
+        name=f"drive-{address}",
+        address=address,
+        control=True,
+        nominal_frequency_hz=nominal_frequency_hz,
+        max_frequency_hz=max_frequency_hz or nominal_frequency_hz,
+    )
+    plan = replace(options.plan((drive,)), offline_after=1)
+    pct = reference_pct
+    if frequency_hz is not None:
+        pct = frequency_hz / nominal_frequency_hz * 100.0
+    if verb is Action.SET_REFERENCE and pct is None:
+        raise UsageError("set_reference needs --frequency or --reference")
+    command = Command(action=verb, reference_pct=pct, actor="cli")
+    async with _Session(plan) as session:
+        _check_address(session.codec, address)
+        result = await _carry_out(session, Planner(plan, session.codec), drive.name, command)
+    if result.outcome is Outcome.DONE:
+        print(f"{action}: done")
+        if verb in (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE):
+            print(
+                "note: fcmaster no longer feeds this drive's control-word watchdog; the drive "
+                "does what its timeout function (FC 8-03/8-04) says",
+                file=sys.stderr,
+            )
+        return 0
+    try:
+        result.raise_for_outcome()
+    except CommandError as exc:
+        raise type(exc)(f"{action}: {exc}") from None
+    return 1  # pragma: no cover - raise_for_outcome raises for every other outcome
+
+
+async def _carry_out(session: _Session, planner: Planner, name: str, command: Command) -> (
+    CommandResult
+):  # fmt: skip
+    ticket = object()
+    for completion in planner.submit(name, command, ticket):
+        if ticket in completion.tickets:
+            return completion.result
+    while True:
+        step = planner.next_step(session.clock.now())
+        # The command heads the queue until it completes, so every step serves it.
+        assert step is not None
+        assert step.kind is StepKind.COMMAND
+        reply = await session.link.transact(step.exchange)
+        now = session.clock.now()
+        if not step.exchange.expects_reply:
+            report = planner.on_sent(step, now)
+        elif reply is None:
+            report = planner.on_failure(step, now, f"no reply from {name}")
+        else:
+            report = planner.on_reply(step, reply, now)
+        for completion in report.completions:
+            if ticket in completion.tickets:
+                return completion.result

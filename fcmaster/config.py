@@ -1,0 +1,321 @@
+"""The YAML configuration: pydantic models at the edge, plain plans handed down.
+
+Loading happens in three passes, and every pass reports *every* problem it finds, each as a
+``(key path, reason)`` pair such as ``("buses[0].drives[3].address", "131 is outside
+1-126")``, so a user fixes a file in one go:
+
+1. YAML syntax and ``${ENV_VAR}`` substitution (``${VAR:-default}`` gives a default);
+2. structure: unknown keys, missing keys and wrong types (pydantic, ``extra="forbid"``);
+3. meaning: names and addresses unique, addresses in range for the protocol and format,
+   monitor parameters that the protocol can address, limits that make sense.
+
+The result is a :class:`Config` whose lines are :class:`~fcmaster.bus.plan.LinePlan`
+dataclasses; nothing below ``service`` ever sees pydantic.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.errors import ConfigError, UsageError
+
+_ENV = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-([^}]*))?\}")
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class DriveModel(_Model):
+    """One drive under ``buses[].drives``."""
+
+    name: str = Field(min_length=1)
+    address: int
+    control: Literal["bus", "monitor"] = "monitor"
+    on_start: Literal["adopt", "stop"] = "adopt"
+    nominal_frequency_hz: float = Field(default=50.0, gt=0)
+    min_frequency_hz: float = Field(default=0.0, ge=0)
+    max_frequency_hz: float | None = Field(default=None, gt=0)
+    monitor: list[str] | None = None
+
+
+class BusModel(_Model):
+    """One line under ``buses``."""
+
+    name: str = Field(min_length=1)
+    port: str = Field(min_length=1)
+    protocol: Literal["danfoss-fc", "mitsubishi", "enc"] = "danfoss-fc"
+    baudrate: int = Field(default=19200, gt=0)
+    parity: Literal["N", "E", "O"] = "E"
+    stopbits: Literal[1, 2] = 1
+    databits: Literal[7, 8] = 8
+    address_format: Literal[31, 126] = 126
+    timeout_s: float | None = Field(default=None, gt=0)
+    retries: int = Field(default=1, ge=0, le=10)
+    pause_s: float | None = Field(default=None, ge=0)
+    response_delay_ms: float = Field(default=10.0, ge=0)
+    offline_after: int = Field(default=3, ge=1)
+    probe_interval_s: float = Field(default=5.0, gt=0)
+    echo: bool = False
+    rs485: bool = False
+    terminator: Literal["none", "cr", "crlf"] = "cr"  # mitsubishi: as the drive's Pr.124
+    wait_time_ms: int | None = Field(default=None, ge=0, le=150)  # mitsubishi
+    simulation: dict[str, Any] | None = None  # sim:// ports: what the simulated drives do
+    drives: list[DriveModel] = Field(default_factory=list)
+
+
+class TokenModel(_Model):
+    """A bearer token and the role it grants."""
+
+    name: str = Field(min_length=1)
+    role: Literal["viewer", "operator"]
+    token: str = Field(min_length=16)
+
+
+class HttpModel(_Model):
+    """The HTTP API, dashboard and metrics listener."""
+
+    listen: str = "127.0.0.1:8080"
+    tokens: list[TokenModel] = Field(default_factory=list)
+    anonymous: Literal["none", "viewer"] = "none"
+    cors_origins: list[str] = Field(default_factory=list)
+
+
+class TlsModel(_Model):
+    """TLS for the MQTT connection."""
+
+    ca: str | None = None
+    cert: str | None = None
+    key: str | None = None
+    insecure: bool = False
+
+
+class MqttModel(_Model):
+    """The MQTT bridge."""
+
+    url: str = "mqtt://127.0.0.1:1883"
+    base_topic: str = "fcmaster"
+    client_id: str | None = None
+    username: str | None = None
+    password: str | None = None
+    tls: TlsModel | None = None
+    heartbeat_s: float = Field(default=60.0, gt=0)
+    deadband_pct: float = Field(default=0.5, ge=0)
+    discovery: bool = False
+    discovery_prefix: str = "homeassistant"
+
+
+class MetricsModel(_Model):
+    """Prometheus metrics at /metrics on the HTTP listener."""
+
+    enabled: bool = True
+
+
+class LoggingModel(_Model):
+    """Log level and format (auto: console on a terminal, JSON otherwise)."""
+
+    level: Literal["debug", "info", "warning", "error"] = "info"
+    format: Literal["auto", "json", "console"] = "auto"
+
+
+class ConfigModel(_Model):
+    """The whole file."""
+
+    buses: list[BusModel] = Field(min_length=1)
+    http: HttpModel | None = None
+    mqtt: MqttModel | None = None
+    metrics: MetricsModel | None = None
+    logging: LoggingModel = LoggingModel()
+    on_shutdown: Literal["hold", "stop"] = "hold"
+
+
+@dataclass(slots=True, frozen=True)
+class Config:
+    """A validated configuration: plans for the lines, models for the adapters."""
+
+    lines: tuple[LinePlan, ...]
+    model: ConfigModel
+    path: Path | None = None
+
+
+def load(path: Path | str) -> Config:
+    """Read, substitute, validate and convert a config file; ConfigError lists every problem."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError([(str(path), f"cannot read: {exc.strerror or exc}")]) from exc
+    return parse(text, path=path)
+
+
+def parse(text: str, *, path: Path | None = None, env: dict[str, str] | None = None) -> Config:
+    """Validate config text (see :func:`load`)."""
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "YAML"
+        raise ConfigError([(where, f"not valid YAML: {getattr(exc, 'problem', exc)}")]) from exc
+    if not isinstance(data, dict):
+        raise ConfigError([("(top)", "the file must be a mapping with a 'buses' list")])
+    problems: list[tuple[str, str]] = []
+    data = _substitute(data, "", os.environ if env is None else env, problems)
+    if problems:
+        raise ConfigError(problems)
+    try:
+        model = ConfigModel.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError([_describe(error) for error in exc.errors()]) from None
+    lines = _check(model, problems)
+    if problems:
+        raise ConfigError(problems)
+    return Config(lines=lines, model=model, path=path)
+
+
+def _substitute(value: Any, path: str, env: Any, problems: list[tuple[str, str]]) -> Any:
+    if isinstance(value, str):
+
+        def replace(match: re.Match[str]) -> str:
+            name, default = match[1], match[2]
+            if name in env:
+                return str(env[name])
+            if default is not None:
+                return default
+            problems.append((path or "(top)", f"environment variable {name} is not set"))
+            return ""
+
+        return _ENV.sub(replace, value)
+    if isinstance(value, dict):
+        return {k: _substitute(v, _join(path, k), env, problems) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_substitute(v, f"{path}[{i}]", env, problems) for i, v in enumerate(value)]
+    return value
+
+
+def _join(path: str, key: object) -> str:
+    return f"{path}.{key}" if path else str(key)
+
+
+def _location(loc: tuple[int | str, ...]) -> str:
+    out = ""
+    for part in loc:
+        out = f"{out}[{part}]" if isinstance(part, int) else _join(out, part)
+    return out or "(top)"
+
+
+def _describe(error: Any) -> tuple[str, str]:
+    loc = tuple(p for p in error["loc"] if not (isinstance(p, str) and p.startswith("function-")))
+    kind, given = error["type"], error.get("input")
+    if kind == "extra_forbidden":
+        return _location(loc), "unknown key"
+    if kind == "missing":
+        return _location(loc), "required key is missing"
+    if kind == "literal_error":
+        expected = error.get("ctx", {}).get("expected", "")
+        return _location(loc), f"{given!r} is not one of {expected}"
+    return _location(loc), f"{error['msg'].lower()} (got {given!r})"
+
+
+def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePlan, ...]:
+    lines: list[LinePlan] = []
+    drive_names: dict[str, str] = {}
+    bus_names: dict[str, str] = {}
+    ports: dict[str, str] = {}
+    for b, bus in enumerate(model.buses):
+        where = f"buses[{b}]"
+        _unique(bus_names, bus.name, f"{where}.name", "bus name", problems)
+        _unique(ports, bus.port, f"{where}.port", "port", problems)
+        codec = codec_for(_line(bus, ()))
+        addresses: dict[str, str] = {}
+        drives: list[DrivePlan] = []
+        for d, drive in enumerate(bus.drives):
+            at = f"{where}.drives[{d}]"
+            _unique(drive_names, drive.name, f"{at}.name", "drive name", problems)
+            if drive.address not in codec.addresses:
+                problems.append(
+                    (f"{at}.address", f"{drive.address} is outside {_span(codec.addresses)}")
+                )
+            else:
+                _unique(addresses, str(drive.address), f"{at}.address", "address", problems)
+            for m, parameter in enumerate(drive.monitor or ()):
+                try:
+                    codec.parameter(parameter)
+                except UsageError as exc:
+                    problems.append((f"{at}.monitor[{m}]", str(exc)))
+            max_hz = drive.max_frequency_hz or drive.nominal_frequency_hz
+            if drive.min_frequency_hz > max_hz:
+                problems.append(
+                    (
+                        f"{at}.min_frequency_hz",
+                        f"{drive.min_frequency_hz} is above the maximum {max_hz}",
+                    )
+                )
+            drives.append(
+                DrivePlan(
+                    name=drive.name,
+                    address=drive.address,
+                    control=drive.control == "bus",
+                    on_start=OnStart(drive.on_start),
+                    monitor=None if drive.monitor is None else tuple(drive.monitor),
+                    nominal_frequency_hz=drive.nominal_frequency_hz,
+                    min_frequency_hz=drive.min_frequency_hz,
+                    max_frequency_hz=max_hz,
+                )
+            )
+        if bus.protocol != "danfoss-fc" and "address_format" in bus.model_fields_set:
+            problems.append((f"{where}.address_format", "only danfoss-fc lines have one"))
+        lines.append(_line(bus, tuple(drives)))
+    if model.http is not None:
+        secrets: dict[str, str] = {}
+        for t, token in enumerate(model.http.tokens):
+            path = f"http.tokens[{t}].token"
+            if token.token in secrets:  # never echo a secret into a message
+                problems.append((path, f"the same token is already used at {secrets[token.token]}"))
+            secrets.setdefault(token.token, path)
+    return tuple(lines)
+
+
+def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
+    return LinePlan(
+        name=bus.name,
+        port=bus.port,
+        protocol=bus.protocol,
+        baudrate=bus.baudrate,
+        parity=bus.parity,
+        stopbits=bus.stopbits,
+        databits=bus.databits,
+        address_format=bus.address_format,
+        timeout_s=bus.timeout_s,
+        retries=bus.retries,
+        pause_s=bus.pause_s,
+        response_delay_s=bus.response_delay_ms / 1000.0,
+        offline_after=bus.offline_after,
+        probe_interval_s=bus.probe_interval_s,
+        echo=bus.echo,
+        rs485=bus.rs485,
+        terminator=bus.terminator,
+        wait_time_ms=bus.wait_time_ms,
+        drives=drives,
+    )
+
+
+def _unique(
+    seen: dict[str, str], value: str, path: str, what: str, problems: list[tuple[str, str]]
+) -> None:
+    if value in seen:
+        problems.append((path, f"{what} {value!r} is already used at {seen[value]}"))
+    else:
+        seen[value] = path
+
+
+def _span(addresses: range) -> str:
+    return f"{addresses.start}-{addresses.stop - 1}"

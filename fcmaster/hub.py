@@ -1,0 +1,178 @@
+"""Fan-out of fleet events to subscribers that never slow the bus.
+
+Theory of operation
+-------------------
+:meth:`Hub.publish` is called on the bus's path, so it only files the event with each
+matching subscription and returns; no subscriber code runs there. A subscription keeps two
+things, and its memory is bounded whatever the subscriber does:
+
+* the latest :class:`~fcmaster.state.DriveUpdated` per drive — a newer snapshot replaces an
+  undelivered older one in place (conflation: at most one pending snapshot per drive);
+* discrete events (alarms, availability, command results, line changes) in order, up to
+  ``max_events``; past that the oldest is dropped and counted, and the subscriber is told
+  with an :class:`EventsDropped` before the next event it receives.
+
+Delivery keeps arrival order: each pending item carries the sequence number it was filed
+under (a snapshot keeps the number of its first undelivered version), and the consumer takes
+whichever head is older.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections import deque
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+
+from fcmaster.state import DriveUpdated, Event
+
+DEFAULT_MAX_EVENTS = 1000
+
+
+@dataclass(slots=True, frozen=True)
+class EventsDropped:
+    """Discrete events were dropped because this subscriber fell behind."""
+
+    count: int
+
+
+class Subscription:
+    """One subscriber's view of the hub. Iterate with ``async for``; close when done."""
+
+    def __init__(
+        self,
+        hub: Hub,
+        *,
+        bus: str | None,
+        drive: str | None,
+        kinds: tuple[type, ...] | None,
+        max_events: int,
+    ) -> None:
+        self._hub = hub
+        self.bus = bus
+        self.drive = drive
+        self.kinds = kinds
+        self._max_events = max_events
+        self._seq = 0
+        self._events: deque[tuple[int, Event]] = deque()
+        self._latest: dict[str, tuple[int, DriveUpdated]] = {}
+        self._ready = asyncio.Event()
+        self._unreported = 0
+        self.dropped = 0
+        self.closed = False
+
+    def matches(self, event: Event) -> bool:
+        """Whether ``event`` passes this subscription's filters."""
+        if self.kinds is not None and not isinstance(event, self.kinds):
+            return False
+        if self.bus is not None and event.bus != self.bus:
+            return False
+        return self.drive is None or event.drive == self.drive
+
+    def offer(self, event: Event) -> None:
+        """File ``event`` (called by the hub; never blocks)."""
+        self._seq += 1
+        if isinstance(event, DriveUpdated):
+            key = event.state.key
+            pending = self._latest.get(key)
+            self._latest[key] = (self._seq if pending is None else pending[0], event)
+        else:
+            if len(self._events) >= self._max_events:
+                self._events.popleft()
+                self.dropped += 1
+                self._unreported += 1
+            self._events.append((self._seq, event))
+        self._ready.set()
+
+    @property
+    def pending(self) -> int:
+        """Items waiting for the subscriber."""
+        return len(self._events) + len(self._latest)
+
+    def get_nowait(self) -> Event | EventsDropped | None:
+        """The next item, or None when there is none."""
+        if self._unreported:
+            count, self._unreported = self._unreported, 0
+            return EventsDropped(count)
+        events, latest = self._events, self._latest
+        if latest:
+            key = next(iter(latest))
+            seq, update = latest[key]
+            if not events or seq < events[0][0]:
+                del latest[key]
+                return update
+        if events:
+            return events.popleft()[1]
+        return None
+
+    async def get(self) -> Event | EventsDropped:
+        """The next item, waiting for one."""
+        while True:
+            item = self.get_nowait()
+            if item is not None:
+                return item
+            if self.closed:
+                raise StopAsyncIteration
+            self._ready.clear()
+            await self._ready.wait()
+
+    def __aiter__(self) -> AsyncIterator[Event | EventsDropped]:
+        return self
+
+    async def __anext__(self) -> Event | EventsDropped:
+        return await self.get()
+
+    def close(self) -> None:
+        """Stop receiving; a waiting ``async for`` ends."""
+        if not self.closed:
+            self.closed = True
+            self._hub.unsubscribe(self)
+            self._ready.set()
+
+    def __enter__(self) -> Subscription:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+class Hub:
+    """Distributes fleet events to subscriptions."""
+
+    def __init__(self) -> None:
+        self._subscriptions: list[Subscription] = []
+        self.published = 0
+
+    def subscribe(
+        self,
+        *,
+        bus: str | None = None,
+        drive: str | None = None,
+        kinds: tuple[type, ...] | None = None,
+        max_events: int = DEFAULT_MAX_EVENTS,
+    ) -> Subscription:
+        """A new subscription to events matching the filters (None: everything)."""
+        subscription = Subscription(self, bus=bus, drive=drive, kinds=kinds, max_events=max_events)
+        self._subscriptions.append(subscription)
+        return subscription
+
+    def unsubscribe(self, subscription: Subscription) -> None:
+        """Remove a subscription (its ``close`` calls this)."""
+        if subscription in self._subscriptions:
+            self._subscriptions.remove(subscription)
+
+    def publish(self, event: Event) -> None:
+        """File ``event`` with every matching subscription; returns at once."""
+        self.published += 1
+        for subscription in self._subscriptions:
+            if subscription.matches(event):
+                subscription.offer(event)
+
+    @property
+    def subscriptions(self) -> int:
+        """How many subscriptions are open."""
+        return len(self._subscriptions)
+
+    def dropped(self) -> int:
+        """Discrete events dropped across open subscriptions."""
+        return sum(s.dropped for s in self._subscriptions)

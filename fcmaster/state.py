@@ -1,0 +1,317 @@
+"""Fleet state: an immutable snapshot per drive, and the typed events its changes make.
+
+Theory of operation
+-------------------
+:class:`FleetState` is a :class:`~fcmaster.bus.master.BusObserver`: every BusMaster reports
+replies, availability changes and command results to it, and it turns them into a new
+:class:`DriveState` (a frozen snapshot — readers can keep a reference without copying or
+locking) plus events, which it hands to ``emit`` (the hub's ``publish`` in the daemon).
+Vendor words stay visible (``status_word``, raw parameter values) beside the normalised
+fields, which mean the same for every protocol.
+
+Alarms and warnings arrive per source word (FC: 16-90 and 16-91 are both alarms); the
+snapshot shows their union, and a change makes one ``ConditionChanged`` per code raised or
+cleared, so consumers never diff lists themselves.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+
+from fcmaster.bus.commands import Command, CommandResult
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.clock import Clock
+from fcmaster.protocol.codec import Condition, Reply
+from fcmaster.protocol.drive import ControlIntent
+
+
+@dataclass(slots=True, frozen=True)
+class Measured:
+    """One measured or read value."""
+
+    value: float | str
+    unit: str
+    raw: int | None = None
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class DriveState:
+    """One drive as the gateway knows it now (DESIGN.md "Drive state")."""
+
+    name: str
+    bus: str
+    address: int
+    protocol: str
+    control: str  # "bus" | "monitor"
+    online: bool = False
+    running: bool = False
+    fault: bool = False
+    warning: bool = False
+    direction: str = "forward"
+    at_reference: bool = False
+    output_frequency_hz: float | None = None
+    reference_pct: float | None = None  # what the master commands; None when it commands nothing
+    status_word: int | None = None
+    values: dict[str, Measured] = field(default_factory=dict)
+    alarms: tuple[Condition, ...] = ()
+    warnings: tuple[Condition, ...] = ()
+    updated_at: float | None = None  # wall-clock seconds of the last good reply
+
+    @property
+    def key(self) -> str:
+        """``bus/name``, unique in the fleet."""
+        return f"{self.bus}/{self.name}"
+
+    def to_json(self) -> dict[str, Any]:
+        """The public JSON shape shown on every surface."""
+        return {
+            "name": self.name,
+            "bus": self.bus,
+            "address": self.address,
+            "protocol": self.protocol,
+            "online": self.online,
+            "control": self.control,
+            "running": self.running,
+            "fault": self.fault,
+            "warning": self.warning,
+            "direction": self.direction,
+            "at_reference": self.at_reference,
+            "output_frequency_hz": self.output_frequency_hz,
+            "reference_pct": self.reference_pct,
+            "status_word": self.status_word,
+            "values": {name: {"value": m.value, "unit": m.unit} for name, m in self.values.items()},
+            "alarms": [{"code": c.code, "text": c.text} for c in self.alarms],
+            "warnings": [{"code": c.code, "text": c.text} for c in self.warnings],
+            "updated_at": rfc3339(self.updated_at),
+        }
+
+
+def rfc3339(wall: float | None) -> str | None:
+    """Wall-clock seconds as RFC 3339 UTC with milliseconds, e.g. 2026-11-22T08:00:00.123Z."""
+    if wall is None:
+        return None
+    return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")[:-6] + "Z"
+
+
+# -- events --------------------------------------------------------------------------------
+
+
+@dataclass(slots=True, frozen=True)
+class DriveUpdated:
+    """A drive's snapshot changed (conflated for slow subscribers: latest wins)."""
+
+    state: DriveState
+
+    @property
+    def bus(self) -> str:
+        """The drive's line."""
+        return self.state.bus
+
+    @property
+    def drive(self) -> str:
+        """The drive's name."""
+        return self.state.name
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class ConditionChanged:
+    """An alarm or warning was raised or cleared."""
+
+    bus: str
+    drive: str
+    kind: str  # "alarm" | "warning"
+    code: int
+    text: str
+    active: bool
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class AvailabilityChanged:
+    """A drive came online or went offline."""
+
+    bus: str
+    drive: str
+    online: bool
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class CommandCompleted:
+    """A command ended, with its one result."""
+
+    bus: str
+    drive: str
+    command: Command
+    result: CommandResult
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class LineChanged:
+    """A line's port opened or was lost, or its statistics were sampled."""
+
+    bus: str
+    up: bool
+    reason: str = ""
+    stats: dict[str, Any] | None = None
+
+    @property
+    def drive(self) -> None:
+        """Line events belong to no drive."""
+        return None
+
+
+Event = DriveUpdated | ConditionChanged | AvailabilityChanged | CommandCompleted | LineChanged
+
+
+class FleetState:
+    """The latest snapshot of every drive; a BusObserver for every line."""
+
+    def __init__(
+        self,
+        lines: tuple[LinePlan, ...],
+        *,
+        emit: Callable[[Event], None],
+        clock: Clock,
+        wall: Callable[[], float] = time.time,
+    ) -> None:
+        self._emit = emit
+        self._clock = clock
+        self._wall = wall
+        self._states: dict[str, DriveState] = {}
+        self._plans: dict[str, DrivePlan] = {}
+        self._sources: dict[str, dict[tuple[str, str], tuple[Condition, ...]]] = {}
+        for line in lines:
+            for drive in line.drives:
+                state = DriveState(
+                    name=drive.name,
+                    bus=line.name,
+                    address=drive.address,
+                    protocol=line.protocol,
+                    control="bus" if drive.control else "monitor",
+                )
+                self._states[state.key] = state
+                self._plans[state.key] = drive
+                self._sources[state.key] = {}
+
+    def snapshot(self) -> list[DriveState]:
+        """Every drive, in configuration order."""
+        return list(self._states.values())
+
+    def get(self, bus: str, name: str) -> DriveState | None:
+        """One drive's snapshot."""
+        return self._states.get(f"{bus}/{name}")
+
+    def find(self, name: str) -> DriveState | None:
+        """A drive by name alone (names are unique across the fleet)."""
+        for state in self._states.values():
+            if state.name == name:
+                return state
+        return None
+
+    # -- BusObserver ---------------------------------------------------------------------
+
+    def drive_replied(
+        self, bus: str, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
+    ) -> None:
+        """Fold one reply into the drive's snapshot."""
+        key = f"{bus}/{drive.name}"
+        old = self._states[key]
+        changes: dict[str, Any] = {
+            "online": True,
+            "updated_at": self._wall() - (self._clock.now() - at),
+            "reference_pct": None if commanded is None else commanded.reference_pct,
+        }
+        status = reply.status
+        if status is not None:
+            changes.update(
+                running=status.running,
+                fault=status.fault,
+                warning=status.warning,
+                at_reference=status.at_reference,
+                status_word=status.word,
+            )
+            if status.reverse is not None:
+                changes["direction"] = "reverse" if status.reverse else "forward"
+            elif commanded is not None:
+                changes["direction"] = "reverse" if commanded.reverse else "forward"
+        if reply.output_frequency_hz is not None:
+            changes["output_frequency_hz"] = abs(reply.output_frequency_hz)
+        elif reply.output_pct is not None:
+            changes["output_frequency_hz"] = round(
+                abs(reply.output_pct) * drive.nominal_frequency_hz / 100.0, 3
+            )
+        if reply.value is not None:
+            value = reply.value
+            name = value.parameter.name
+            if value.index:
+                name = f"{name}[{value.index}]"
+            values = dict(old.values)
+            values[name] = Measured(value.value, value.unit, value.raw)
+            changes["values"] = values
+        if reply.conditions is not None:
+            self._conditions(key, old, reply, changes)
+        new = dataclasses.replace(old, **changes)
+        self._states[key] = new
+        if not old.online:
+            self._emit(AvailabilityChanged(bus=new.bus, drive=new.name, online=True))
+        self._emit(DriveUpdated(new))
+
+    def _conditions(self, key: str, old: DriveState, reply: Reply, changes: dict[str, Any]) -> None:
+        report = reply.conditions
+        assert report is not None
+        sources = self._sources[key]
+        sources[(report.kind, report.source)] = report.active
+        union = tuple(
+            dict.fromkeys(
+                condition
+                for (kind, _), active in sources.items()
+                if kind == report.kind
+                for condition in active
+            )
+        )
+        before = old.alarms if report.kind == "alarm" else old.warnings
+        changes["alarms" if report.kind == "alarm" else "warnings"] = union
+        for condition in union:
+            if condition not in before:
+                self._emit(self._condition_event(old, report.kind, condition, active=True))
+        for condition in before:
+            if condition not in union:
+                self._emit(self._condition_event(old, report.kind, condition, active=False))
+
+    @staticmethod
+    def _condition_event(
+        state: DriveState, kind: str, condition: Condition, *, active: bool
+    ) -> ConditionChanged:
+        return ConditionChanged(
+            bus=state.bus,
+            drive=state.name,
+            kind=kind,
+            code=condition.code,
+            text=condition.text,
+            active=active,
+        )
+
+    def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
+        """Mark a drive online or offline; its last values stay, with their time."""
+        key = f"{bus}/{drive.name}"
+        old = self._states[key]
+        if old.online == online:
+            return
+        new = dataclasses.replace(old, online=online)
+        self._states[key] = new
+        self._emit(AvailabilityChanged(bus=new.bus, drive=new.name, online=online))
+        self._emit(DriveUpdated(new))
+
+    def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
+        """A line opened or was lost."""
+        self._emit(LineChanged(bus=bus, up=up, reason=reason))
+
+    def command_completed(
+        self, bus: str, drive: str, command: Command, result: CommandResult
+    ) -> None:
+        """A command ended; its result becomes an event."""
+        self._emit(CommandCompleted(bus=bus, drive=drive, command=command, result=result))

@@ -1,0 +1,185 @@
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from fcmaster.config import load, parse
+from fcmaster.errors import ConfigError
+
+GOOD = """
+buses:
+  - name: line1
+    port: /dev/ttyUSB0
+    protocol: danfoss-fc
+    baudrate: 19200
+    drives:
+      - {name: pump-1, address: 1, control: bus, nominal_frequency_hz: 50, max_frequency_hz: 50}
+      - {name: pump-2, address: 2, monitor: ["16-13", "16-14"]}
+http:
+  listen: 127.0.0.1:8080
+  tokens:
+    - {name: ops, role: operator, token: "${FCM_OPERATOR_TOKEN}"}
+"""
+ENV = {"FCM_OPERATOR_TOKEN": "0123456789abcdef0123"}
+
+
+def _problems(text: str, env: dict[str, str] | None = None) -> list[tuple[str, str]]:
+    with pytest.raises(ConfigError) as info:
+        parse(textwrap.dedent(text), env=ENV if env is None else env)
+    return info.value.problems
+
+
+def test_a_good_config_becomes_line_plans() -> None:
+    config = parse(GOOD, env=ENV)
+    (line,) = config.lines
+    assert line.name == "line1"
+    assert line.baudrate == 19200
+    assert line.char_bits == 11  # 8E1 by default
+    pump1, pump2 = line.drives
+    assert pump1.control
+    assert not pump2.control  # monitor is the default
+    assert pump2.monitor == ("16-13", "16-14")
+    assert config.model.http is not None
+    assert config.model.http.tokens[0].token == ENV["FCM_OPERATOR_TOKEN"]
+
+
+def _drive_line(drives: str, extra: str = "") -> str:
+    return f"""
+buses:
+  - name: line1
+    port: /dev/ttyUSB0
+{extra}    drives:
+{drives}
+"""
+
+
+BAD = [
+    (
+        "duplicate drive names",
+        _drive_line("      - {name: a, address: 1}\n      - {name: a, address: 2}"),
+        "buses[0].drives[1].name",
+        "already used at buses[0].drives[0].name",
+    ),
+    (
+        "duplicate addresses",
+        _drive_line("      - {name: a, address: 7}\n      - {name: b, address: 7}"),
+        "buses[0].drives[1].address",
+        "already used",
+    ),
+    (
+        "address out of range for the 126 format",
+        _drive_line("      - {name: a, address: 131}"),
+        "buses[0].drives[0].address",
+        "131 is outside 1-126",
+    ),
+    (
+        "address out of range for the 31 format",
+        _drive_line("      - {name: a, address: 32}", "    address_format: 31\n"),
+        "buses[0].drives[0].address",
+        "32 is outside 1-31",
+    ),
+    (
+        "unknown protocol",
+        _drive_line("      - {name: a, address: 1}", "    protocol: modbus\n"),
+        "buses[0].protocol",
+        "'modbus' is not one of",
+    ),
+    (
+        "unknown key",
+        _drive_line("      - {name: a, address: 1, colour: red}"),
+        "buses[0].drives[0].colour",
+        "unknown key",
+    ),
+    (
+        "wrong type",
+        _drive_line("      - {name: a, address: one}"),
+        "buses[0].drives[0].address",
+        "integer",
+    ),
+    (
+        "missing port",
+        "buses:\n  - name: line1\n    drives: []\n",
+        "buses[0].port",
+        "required key is missing",
+    ),
+    (
+        "bad parameter name in a monitor list",
+        _drive_line('      - {name: a, address: 1, monitor: ["16-13", "sixteen"]}'),
+        "buses[0].drives[0].monitor[1]",
+        "not written like 16-13",
+    ),
+    (
+        "unset environment variable",
+        _drive_line("      - {name: a, address: 1}").replace("/dev/ttyUSB0", "${NO_SUCH_PORT}"),
+        "buses[0].port",
+        "environment variable NO_SUCH_PORT is not set",
+    ),
+    (
+        "minimum above maximum frequency",
+        _drive_line("      - {name: a, address: 1, min_frequency_hz: 60, max_frequency_hz: 50}"),
+        "buses[0].drives[0].min_frequency_hz",
+        "above the maximum",
+    ),
+    (
+        "no buses at all",
+        "http: {listen: 127.0.0.1:8080}\n",
+        "buses",
+        "required key is missing",
+    ),
+]
+
+
+@pytest.mark.parametrize(("case", "text", "path", "reason"), BAD, ids=[b[0] for b in BAD])
+def test_a_bad_config_names_the_key_and_what_is_wrong(
+    case: str, text: str, path: str, reason: str
+) -> None:
+    problems = _problems(text)
+    assert any(p == path and reason in r for p, r in problems), problems
+
+
+def test_every_problem_is_reported_at_once() -> None:
+    text = _drive_line(
+        "      - {name: a, address: 200}\n"
+        "      - {name: a, address: 2}\n"
+        "      - {name: c, address: 3, monitor: [bogus]}"
+    )
+    paths = [p for p, _ in _problems(text)]
+    assert paths == [
+        "buses[0].drives[0].address",
+        "buses[0].drives[1].name",
+        "buses[0].drives[2].monitor[0]",
+    ]
+
+
+def test_a_duplicated_token_is_reported_without_echoing_the_secret() -> None:
+    secret = "s3cret-s3cret-s3cret"
+    text = GOOD + f'    - {{name: ops2, role: viewer, token: "{secret}"}}\n'
+    text += f'    - {{name: ops3, role: viewer, token: "{secret}"}}\n'
+    problems = _problems(text)
+    assert problems == [
+        ("http.tokens[2].token", "the same token is already used at http.tokens[1].token")
+    ]
+    assert all(secret not in reason for _, reason in problems)
+
+
+def test_environment_defaults_apply_when_unset() -> None:
+    text = _drive_line("      - {name: a, address: 1}").replace(
+        "/dev/ttyUSB0", "${FCM_PORT:-/dev/ttyS1}"
+    )
+    assert parse(text, env={}).lines[0].port == "/dev/ttyS1"
+
+
+def test_invalid_yaml_gives_the_line(tmp_path: Path) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text("buses:\n  - name: [unclosed\n")
+    with pytest.raises(ConfigError) as info:
+        load(path)
+    ((where, reason),) = info.value.problems
+    assert where.startswith("line ")
+    assert "not valid YAML" in reason
+
+
+def test_a_missing_file_is_a_config_error(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError) as info:
+        load(tmp_path / "absent.yaml")
+    assert "cannot read" in info.value.problems[0][1]

@@ -1,0 +1,146 @@
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.protocol.codec import (
+    Condition,
+    ConditionReport,
+    DriveStatus,
+    ParameterKey,
+    ParameterValue,
+    Reply,
+)
+from fcmaster.protocol.drive import ControlIntent, Motion
+from fcmaster.state import (
+    AvailabilityChanged,
+    ConditionChanged,
+    DriveState,
+    DriveUpdated,
+    Event,
+    FleetState,
+)
+from tests.fakes import FakeClock
+
+PUMP = DrivePlan(name="pump-1", address=1, control=True, nominal_frequency_hz=60.0)
+FAN = DrivePlan(name="fan-1", address=2)
+LINE = LinePlan(name="line1", port="sim://line1", drives=(PUMP, FAN))
+WALL_AT_START = 1_790_000_000.0
+
+
+def _fleet() -> tuple[FleetState, list[Event], FakeClock]:
+    events: list[Event] = []
+    clock = FakeClock(start=500.0)
+    fleet = FleetState(
+        (LINE,), emit=events.append, clock=clock, wall=lambda: WALL_AT_START + clock.now() - 500.0
+    )
+    return fleet, events, clock
+
+
+def _get(fleet: FleetState, name: str) -> DriveState:
+    state = fleet.get("line1", name)
+    assert state is not None
+    return state
+
+
+def _status(**flags: bool) -> DriveStatus:
+    return DriveStatus(
+        word=0x0F07,
+        running=flags.get("running", False),
+        fault=flags.get("fault", False),
+        warning=flags.get("warning", False),
+        at_reference=flags.get("at_reference", False),
+        reverse=flags.get("reverse"),
+    )
+
+
+def _alarms(source: str, *codes: int) -> Reply:
+    return Reply(
+        address=1,
+        status=_status(fault=bool(codes)),
+        conditions=ConditionReport(
+            kind="alarm", source=source, active=tuple(Condition(c, f"A{c}") for c in codes)
+        ),
+    )
+
+
+def test_every_drive_starts_offline_with_the_public_json_keys() -> None:
+    fleet, _, _ = _fleet()
+    state = fleet.get("line1", "pump-1")
+    assert state is not None
+    assert set(state.to_json()) == {
+        "name", "bus", "address", "protocol", "online", "control", "running", "fault",
+        "warning", "direction", "at_reference", "output_frequency_hz", "reference_pct",
+        "status_word", "values", "alarms", "warnings", "updated_at",
+    }  # fmt: skip
+    assert state.online is False
+    assert state.control == "bus"
+    assert fleet.get("line1", "fan-1") is not None
+    assert _get(fleet, "fan-1").control == "monitor"
+
+
+def test_a_reply_sets_status_frequency_and_the_time_it_arrived() -> None:
+    fleet, events, clock = _fleet()
+    reply = Reply(address=1, status=_status(running=True, at_reference=True), output_pct=50.0)
+    clock.time = 510.0
+    fleet.drive_replied("line1", PUMP, reply, 509.75, ControlIntent(Motion.RUN, False, 50.0))
+    state = fleet.get("line1", "pump-1")
+    assert state is not None
+    assert state.online
+    assert state.running
+    assert state.at_reference
+    assert state.output_frequency_hz == 30.0  # 50 % of a 60 Hz nominal
+    assert state.reference_pct == 50.0
+    assert state.status_word == 0x0F07
+    # arrived 0.25 s before "now": wall 1_790_000_009.75 (`date -u -d @1790000009.75`)
+    assert state.to_json()["updated_at"] == "2026-09-21T14:13:29.750Z"
+    assert events[0] == AvailabilityChanged(bus="line1", drive="pump-1", online=True)
+    assert isinstance(events[1], DriveUpdated)
+
+
+def test_direction_comes_from_the_reply_or_else_from_the_command() -> None:
+    fleet, _, _ = _fleet()
+    fleet.drive_replied("line1", PUMP, Reply(address=1, status=_status(reverse=True)), 500.0, None)
+    assert _get(fleet, "pump-1").direction == "reverse"
+    intent = ControlIntent(Motion.STOP, reverse=False)
+    fleet.drive_replied("line1", PUMP, Reply(address=1, status=_status()), 500.0, intent)
+    assert _get(fleet, "pump-1").direction == "forward"
+
+
+def test_parameter_values_accumulate_by_name_and_index() -> None:
+    fleet, _, _ = _fleet()
+    key = ParameterKey("16-14", 1614)
+    for index, value in ((0, 5.24), (3, 1.5)):
+        value_read = ParameterValue(parameter=key, index=index, raw=None, value=value, unit="A")
+        fleet.drive_replied("line1", PUMP, Reply(address=1, value=value_read), 500.0, None)
+    values = _get(fleet, "pump-1").to_json()["values"]
+    assert values == {
+        "16-14": {"value": 5.24, "unit": "A"},
+        "16-14[3]": {"value": 1.5, "unit": "A"},
+    }
+
+
+def test_alarms_from_several_words_are_united_and_each_change_is_one_event() -> None:
+    fleet, events, _ = _fleet()
+    fleet.drive_replied("line1", PUMP, _alarms("16-90", 13, 14), 500.0, None)
+    fleet.drive_replied("line1", PUMP, _alarms("16-91", 940), 500.0, None)
+    state = fleet.get("line1", "pump-1")
+    assert state is not None
+    assert [c.code for c in state.alarms] == [13, 14, 940]
+    raised = [e for e in events if isinstance(e, ConditionChanged)]
+    assert [(e.code, e.active) for e in raised] == [(13, True), (14, True), (940, True)]
+    events.clear()
+    fleet.drive_replied("line1", PUMP, _alarms("16-90", 14), 500.0, None)
+    changes = [(e.code, e.active) for e in events if isinstance(e, ConditionChanged)]
+    assert changes == [(13, False)]
+    assert [c.code for c in _get(fleet, "pump-1").alarms] == [14, 940]
+
+
+def test_going_offline_keeps_the_last_values_and_emits_once() -> None:
+    fleet, events, _ = _fleet()
+    fleet.drive_replied("line1", FAN, Reply(address=2, status=_status(running=True)), 500.0, None)
+    events.clear()
+    fleet.drive_availability("line1", FAN, False, 501.0)
+    fleet.drive_availability("line1", FAN, False, 502.0)
+    state = fleet.get("line1", "fan-1")
+    assert state is not None
+    assert not state.online
+    assert state.running  # last known, with its time
+    assert events[0] == AvailabilityChanged(bus="line1", drive="fan-1", online=False)
+    assert len([e for e in events if isinstance(e, AvailabilityChanged)]) == 1
