@@ -4,17 +4,18 @@ Bytes are delivered by the event loop's reader callback straight into a buffer, 
 waits on one future with one timer: no StreamReader, no per-read task, so the hot path
 costs one wake-up per chunk the kernel delivers.
 
-Pseudo-terminals refuse some termios changes a UART takes: opening one with parity that a
-previous open already set fails with EINVAL. A pty carries no parity bits anyway, so on a
-pty (and only there) the open is retried without parity; the character timing the rest of
-the master computes still uses the configured format.
+Pseudo-terminals refuse some termios changes a UART takes: once parity has been asked for,
+every later reconfiguration of the pty fails with EINVAL. A pty carries no parity bits
+anyway, so on a pty (and only there) the port is opened without parity; everything else is
+the same code path as a real UART, and the character timing the master computes still uses
+the configured format.
 """
 
 from __future__ import annotations
 
 import asyncio
-import errno
 import os
+import termios
 from typing import Any
 
 import serial
@@ -104,24 +105,26 @@ class SerialTransport:
                 transport, _ = await serial_asyncio_fast.connection_for_serial(
                     loop, lambda: receiver, instance
                 )
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise PortError(f"cannot open {self.port}: {exc}") from exc
+        except (serial.SerialException, OSError, ValueError, termios.error) as exc:
+            raise PortError(
+                f"cannot open {self.port}: {exc} (check the device path, and that this user "
+                "may use it, e.g. is in the dialout group)"
+            ) from exc
         self._transport = transport
 
     def _open_serial(self) -> serial.Serial:
-        instance = serial.serial_for_url(self.port, do_not_open=True, **self._settings)
+        settings = self._settings
+        if settings["parity"] != serial.PARITY_NONE and is_pty(self.port):
+            # A pty refuses every later termios change once parity was asked for (even
+            # pyserial-asyncio's own timeout=0), and carries no parity bits anyway.
+            log.debug("bus.pty_parity_ignored", port=self.port, parity=settings["parity"])
+            settings = {**settings, "parity": serial.PARITY_NONE}
+        instance = serial.serial_for_url(self.port, do_not_open=True, timeout=0, **settings)
         if self._rs485:
             instance.rs485_mode = serial.rs485.RS485Settings(
                 rts_level_for_tx=True, rts_level_for_rx=False
             )
-        try:
-            instance.open()
-        except serial.SerialException as exc:
-            if exc.errno != errno.EINVAL or not is_pty(self.port):
-                raise
-            log.info("bus.pty_parity_ignored", port=self.port, parity=self._settings["parity"])
-            instance.parity = serial.PARITY_NONE
-            instance.open()
+        instance.open()
         return instance
 
     async def close(self) -> None:

@@ -1,0 +1,111 @@
+"""SerialTransport through a real pseudo-terminal: the same termios path as a UART."""
+
+import asyncio
+import os
+import tty
+from collections.abc import Iterator
+
+import pytest
+
+from fcmaster.bus.serial import SerialTransport, is_pty
+from fcmaster.clock import MonotonicClock
+from fcmaster.errors import PortError, ReplyTimeout
+
+
+@pytest.fixture
+def pty_pair() -> Iterator[tuple[int, str]]:
+    """The controlling side's fd (our stand-in for the line) and the device path."""
+    controller, device = os.openpty()
+    tty.setraw(device)
+    path = os.ttyname(device)
+    try:
+        yield controller, path
+    finally:
+        os.close(controller)
+        os.close(device)
+
+
+async def test_bytes_go_out_in_one_write_and_replies_come_back(
+    pty_pair: tuple[int, str],
+) -> None:
+    controller, path = pty_pair
+    transport = SerialTransport(path, baudrate=19200, parity="E")
+    await transport.open()
+    clock = MonotonicClock()
+    try:
+        await transport.write(b"\x02\x06\x81\x04\x7c\x20\x00\xdd")
+        await asyncio.sleep(0.01)
+        assert os.read(controller, 64) == b"\x02\x06\x81\x04\x7c\x20\x00\xdd"
+        os.write(controller, b"\x02\x06\x81\x0f\x07\x20\x00\x2f")
+        async with asyncio.timeout(2):
+            got = b""
+            while len(got) < 8:
+                got += await transport.read(clock.now() + 1.0)
+        assert got == b"\x02\x06\x81\x0f\x07\x20\x00\x2f"
+    finally:
+        await transport.close()
+
+
+async def test_a_read_with_nothing_arriving_times_out_at_its_deadline(
+    pty_pair: tuple[int, str],
+) -> None:
+    _, path = pty_pair
+    transport = SerialTransport(path, baudrate=19200)
+    await transport.open()
+    clock = MonotonicClock()
+    try:
+        deadline = clock.now() + 0.05
+        with pytest.raises(ReplyTimeout):
+            await transport.read(deadline)
+        assert clock.now() >= deadline
+    finally:
+        await transport.close()
+
+
+async def test_stale_input_is_discarded_and_returned(pty_pair: tuple[int, str]) -> None:
+    controller, path = pty_pair
+    transport = SerialTransport(path, baudrate=19200)
+    await transport.open()
+    try:
+        os.write(controller, b"late reply")
+        await asyncio.sleep(0.05)
+        assert transport.discard_input() == b"late reply"
+        assert transport.discard_input() == b""
+    finally:
+        await transport.close()
+
+
+async def test_reopening_a_pty_with_parity_works_although_the_kernel_refuses_it(
+    pty_pair: tuple[int, str],
+) -> None:
+    _, path = pty_pair
+    assert is_pty(path)
+    for _ in range(3):  # the second open of a pty with parity E fails with EINVAL in termios
+        transport = SerialTransport(path, baudrate=19200, parity="E")
+        await transport.open()
+        await transport.close()
+
+
+async def test_a_missing_port_is_a_port_error_that_says_what_to_check() -> None:
+    transport = SerialTransport("/dev/fcmaster-no-such-port", baudrate=9600)
+    with pytest.raises(PortError, match="check the device path"):
+        await transport.open()
+
+
+async def test_a_port_that_disappears_raises_port_error_on_read() -> None:
+    controller, device = os.openpty()
+    tty.setraw(device)
+    transport = SerialTransport(os.ttyname(device), baudrate=19200)
+    await transport.open()
+    os.close(device)
+    os.close(controller)  # the line goes away under the open transport (adapter unplugged)
+    clock = MonotonicClock()
+    try:
+        with pytest.raises(PortError):
+            async with asyncio.timeout(2):
+                while True:
+                    await transport.read(clock.now() + 0.2)
+    except ReplyTimeout:  # pragma: no cover - only if the kernel never reports the hang-up
+        pytest.fail("a vanished port must surface as PortError, not as a timeout")
+    finally:
+        await transport.close()
