@@ -1,0 +1,10 @@
+"""Adapters to the plant: MQTT, HTTP with its dashboard, Prometheus metrics.
+
+Each adapter is a hub subscriber plus a command source, and reaches the lines only through
+the :class:`~fcmaster.adapters.gateway.Gateway` the service hands it.
+"""
+
+from fcmaster.adapters.commands import parse_command
+from fcmaster.adapters.gateway import Gateway, LineInfo
+
+__all__ = ["Gateway", "LineInfo", "parse_command"]

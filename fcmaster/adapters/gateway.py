@@ -1,0 +1,57 @@
+"""What an adapter may use of the daemon: the seam between adapters and the service."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from fcmaster.bus.commands import Command, CommandResult
+from fcmaster.bus.plan import DrivePlan
+from fcmaster.hub import Hub
+from fcmaster.state import FleetState
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class LineInfo:
+    """One line as the adapters show it."""
+
+    name: str
+    port: str
+    protocol: str
+    baudrate: int
+    up: bool
+    drives: tuple[str, ...]
+    stats: dict[str, Any]
+
+    def to_json(self) -> dict[str, Any]:
+        """The public JSON shape of a line."""
+        return {
+            "name": self.name,
+            "port": self.port,
+            "protocol": self.protocol,
+            "baudrate": self.baudrate,
+            "up": self.up,
+            "drives": list(self.drives),
+            "stats": self.stats,
+        }
+
+
+class Gateway(Protocol):
+    """The daemon as adapters see it (the Service meets this)."""
+
+    @property
+    def hub(self) -> Hub:
+        """Where fleet events are published."""
+
+    @property
+    def fleet(self) -> FleetState:
+        """The latest snapshot of every drive."""
+
+    def drive_plan(self, name: str) -> DrivePlan | None:
+        """A drive's configuration (limits, nominal frequency, control), or None."""
+
+    def lines(self) -> list[LineInfo]:
+        """Every line with its statistics."""
+
+    async def execute(self, drive: str, command: Command) -> CommandResult:
+        """Carry out ``command`` on drive ``drive``; one result, always."""
