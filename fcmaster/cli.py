@@ -1,22 +1,52 @@
 """The `fcmaster` command line: parses arguments and maps the error tree to exit codes.
 
 Exit codes: 0 success; 1 the drive or the line failed the request; 2 bad input from the
-user (arguments, config, a malformed frame).
+user (arguments, config, a malformed frame). Each subcommand's work lives in
+``fcmaster.commands``; this module only parses, dispatches and maps errors.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
 import sys
+from collections.abc import Callable, Coroutine
+from pathlib import Path
+from typing import Any
 
 from fcmaster import __version__
+from fcmaster.clock import new_event_loop
 from fcmaster.errors import BusError, CommandError, ConfigError, FcmasterError, UsageError
 
 PROTOCOLS = ("danfoss-fc", "mitsubishi", "enc")
+DEMO_CONFIG = Path(__file__).resolve().parent.parent / "config" / "demo.yaml"
 
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+
+
+def _addresses(text: str) -> list[int]:
+    """``1-8,12`` → [1, …, 8, 12]."""
+    out: list[int] = []
+    try:
+        for part in text.split(","):
+            first, _, last = part.strip().partition("-")
+            out.extend(range(int(first), int(last or first) + 1))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not like 1-126 or 1,4,7") from None
+    return out
+
+
+def _line_options(parser: argparse.ArgumentParser) -> None:
+    """The options of every command that opens a port."""
+    parser.add_argument("--port", required=True, help="/dev/ttyUSB0, COM3, socket://host:port")
+    parser.add_argument("--protocol", choices=PROTOCOLS, default="danfoss-fc")
+    parser.add_argument("--baudrate", type=int, help="default: the protocol's factory setting")
+    parser.add_argument("--parity", choices=("N", "E", "O"))
+    parser.add_argument("--stopbits", type=int, choices=(1, 2))
+    parser.add_argument("--address-format", type=int, choices=(31, 126), default=126)
+    parser.add_argument("--timeout", type=float, help="reply deadline in seconds")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -27,38 +57,214 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"fcmaster {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    decode = commands.add_parser(
-        "decode", help="explain a captured frame field by field",
-        description="Decode a captured frame. FRAME is hex bytes; spaces are optional.",
+    run = commands.add_parser("run", help="run the daemon (the simulated demo fleet by default)")
+    run.add_argument("--config", type=Path, help=f"default: {DEMO_CONFIG.name}, a simulated fleet")
+
+    check = commands.add_parser("check", help="validate a config file")
+    check.add_argument("--config", type=Path, required=True)
+
+    scan = commands.add_parser("scan", help="find which addresses answer")
+    _line_options(scan)
+    scan.add_argument("--addresses", type=_addresses, help="default: every address")
+    scan.add_argument("--json", action="store_true", help="print JSON")
+
+    status = commands.add_parser("status", help="one drive's decoded status now")
+    _line_options(status)
+    status.add_argument("--address", type=int, required=True)
+    status.add_argument("--json", action="store_true", help="print JSON")
+
+    read = commands.add_parser("read", help="read a parameter, scaled to its unit")
+    _line_options(read)
+    read.add_argument("--address", type=int, required=True)
+    read.add_argument("--index", type=int, default=0)
+    read.add_argument("--json", action="store_true", help="print JSON")
+    read.add_argument("parameter", metavar="PARAM", help="as the manual writes it, e.g. 16-13")
+
+    write = commands.add_parser("write", help="write a parameter")
+    _line_options(write)
+    write.add_argument("--address", type=int, required=True)
+    write.add_argument("--index", type=int, default=0)
+    write.add_argument("--persist", action="store_true", help="to non-volatile memory too")
+    write.add_argument("parameter", metavar="PARAM")
+    write.add_argument("value", metavar="VALUE")
+
+    control = commands.add_parser("control", help="start, stop, coast, quick-stop, reset, …")
+    _line_options(control)
+    control.add_argument("--address", type=int, required=True)
+    control.add_argument(
+        "action",
+        metavar="ACTION",
+        help="start, stop, coast, quick-stop, reset, forward, reverse, jog, set-reference",
+    )
+    reference = control.add_mutually_exclusive_group()
+    reference.add_argument("--frequency", type=float, help="Hz")
+    reference.add_argument("--reference", type=float, help="% of the nominal frequency")
+    control.add_argument("--nominal-frequency", type=float, default=50.0, help="Hz at 100 %%")
+    control.add_argument("--max-frequency", type=float, help="refuse more (default: nominal)")
+
+    sim = commands.add_parser(
+        "sim", help="serve simulated drives on a pseudo-terminal",
+        description="Serve simulated drives on a pty; prints 'BUS PATH', runs until SIGINT/TERM.",
     )  # fmt: skip
+    sim.add_argument("--protocol", choices=PROTOCOLS, default="danfoss-fc")
+    sim.add_argument("--addresses", type=_addresses, default=[1], help="e.g. 1-8 (default 1)")
+    sim.add_argument("--baudrate", type=int, default=19200)
+    sim.add_argument("--parity", choices=("N", "E", "O"), default="E")
+    sim.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
+    sim.add_argument("--name", default="line1", help="the bus name printed before the path")
+    sim.add_argument("--link", help="also make this path a symbolic link to the pty")
+    sim.add_argument("--faults", default="", help="e.g. drop=0.05,corrupt=0.01,late=0.01,echo")
+    sim.add_argument("--response-delay-ms", type=float, help="every drive's 8-35 (default 10)")
+
+    decode = commands.add_parser(
+        "decode",
+        help="explain a captured frame field by field",
+        description="Decode a captured frame. FRAME is hex bytes; spaces are optional.",
+    )
     decode.add_argument("--protocol", choices=PROTOCOLS, default="danfoss-fc")
     decode.add_argument(
-        "--as", dest="direction", choices=("request", "response"), default="request",
+        "--as",
+        dest="direction",
+        choices=("request", "response"),
+        default="request",
         help="whether the frame went to the drive (request, default) or came from it",
-    )  # fmt: skip
+    )
     decode.add_argument("--json", action="store_true", help="print JSON")
     decode.add_argument("frame", nargs="+", metavar="FRAME")
     return parser
 
 
+def _run_async(coro: Coroutine[Any, Any, int]) -> int:
+    with asyncio.Runner(loop_factory=new_event_loop) as runner:
+        return runner.run(coro)
+
+
+def _options(args: argparse.Namespace) -> Any:
+    from fcmaster.commands.commission import LineOptions
+
+    return LineOptions(
+        port=args.port,
+        protocol=args.protocol,
+        baudrate=args.baudrate,
+        parity=args.parity,
+        stopbits=args.stopbits,
+        address_format=args.address_format,
+        timeout_s=args.timeout,
+    )
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from fcmaster.commands import daemon
+
+    return _run_async(daemon.run(args.config or DEMO_CONFIG, demo=args.config is None))
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from fcmaster.commands import daemon
+
+    return daemon.check(args.config)
+
+
+def _cmd_scan(args: argparse.Namespace) -> int:
+    from fcmaster.commands import commission
+
+    addresses = args.addresses or list(range(1, 127 if args.protocol != "mitsubishi" else 32))
+    return _run_async(commission.scan(_options(args), addresses, as_json=args.json))
+
+
+def _cmd_status(args: argparse.Namespace) -> int:
+    from fcmaster.commands import commission
+
+    return _run_async(commission.status(_options(args), args.address, as_json=args.json))
+
+
+def _cmd_read(args: argparse.Namespace) -> int:
+    from fcmaster.commands import commission
+
+    return _run_async(
+        commission.access(
+            _options(args), args.address, args.parameter, index=args.index, value=None,
+            as_json=args.json,
+        )
+    )  # fmt: skip
+
+
+def _cmd_write(args: argparse.Namespace) -> int:
+    from fcmaster.commands import commission
+
+    return _run_async(
+        commission.access(
+            _options(args), args.address, args.parameter, index=args.index, value=args.value,
+            persist=args.persist,
+        )
+    )  # fmt: skip
+
+
+def _cmd_control(args: argparse.Namespace) -> int:
+    from fcmaster.commands import commission
+
+    return _run_async(
+        commission.control(
+            _options(args),
+            args.address,
+            args.action,
+            frequency_hz=args.frequency,
+            reference_pct=args.reference,
+            nominal_frequency_hz=args.nominal_frequency,
+            max_frequency_hz=args.max_frequency,
+        )
+    )
+
+
+def _cmd_sim(args: argparse.Namespace) -> int:
+    from fcmaster.commands import sim
+
+    return _run_async(sim.run(args))
+
+
+def _cmd_decode(args: argparse.Namespace) -> int:
+    from fcmaster.commands import decode
+
+    return decode.run(
+        args.protocol,
+        " ".join(args.frame),
+        as_response=args.direction == "response",
+        as_json=args.json,
+    )
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "run": _cmd_run,
+    "check": _cmd_check,
+    "scan": _cmd_scan,
+    "status": _cmd_status,
+    "read": _cmd_read,
+    "write": _cmd_write,
+    "control": _cmd_control,
+    "decode": _cmd_decode,
+    "sim": _cmd_sim,
+}
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     args = build_parser().parse_args(argv)
-    try:
-        if args.command == "decode":
-            from fcmaster.commands import decode
+    if args.command not in ("run", "decode", "check"):
+        from fcmaster import logsetup
 
-            return decode.run(
-                args.protocol, " ".join(args.frame),
-                as_response=args.direction == "response", as_json=args.json,
-            )  # fmt: skip
-    except (UsageError, ConfigError) as exc:
+        logsetup.configure("warning")  # commissioning tools: only what needs attention
+    try:
+        return COMMANDS[args.command](args)
+    except ConfigError as exc:
+        print(f"fcmaster {args.command}: invalid configuration", file=sys.stderr)
+        for path, reason in exc.problems:
+            print(f"  {path}: {reason}", file=sys.stderr)
+        return EXIT_USAGE
+    except UsageError as exc:
         print(f"fcmaster {args.command}: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except (BusError, CommandError) as exc:
+    except (BusError, CommandError, FcmasterError) as exc:
         print(f"fcmaster {args.command}: {exc}", file=sys.stderr)
         return EXIT_FAILED
-    except FcmasterError as exc:
-        print(f"fcmaster {args.command}: {exc}", file=sys.stderr)
-        return EXIT_FAILED
-    raise AssertionError(f"unhandled command {args.command}")  # pragma: no cover
+    except KeyboardInterrupt:
+        return 130

@@ -1,0 +1,71 @@
+"""`fcmaster run` and `fcmaster check`: the daemon and its config check."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import structlog
+
+from fcmaster import config as config_module
+from fcmaster import logsetup
+from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.plan import LinePlan
+
+log = structlog.get_logger("fcmaster.cli")
+
+
+def poll_round_s(plan: LinePlan) -> tuple[float, float]:
+    """Worst-case seconds for one poll of every drive, and for a full monitor refresh.
+
+    Every drive is assumed to answer, each after the line's response delay.
+    """
+    codec = codec_for(plan)
+    pause = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
+    one_round = full_refresh = 0.0
+    for drive in plan.drives:
+        monitor = (
+            codec.default_monitor()
+            if drive.monitor is None
+            else tuple(codec.parameter(p) for p in drive.monitor)
+        )
+        times = []
+        for read in codec.poll_sequence(monitor):
+            exchange = codec.poll(drive.address, None, read)
+            wire = plan.wire_s(len(exchange.request) + exchange.reply_length)
+            times.append(wire + plan.response_delay_s + pause)
+        one_round += max(times)
+        full_refresh += sum(times)
+    return one_round, full_refresh
+
+
+def check(path: Path) -> int:
+    """Validate ``path``; print a summary. ConfigError (exit 2) lists every problem."""
+    config = config_module.load(path)
+    print(f"{path}: valid")
+    for plan in config.lines:
+        controlled = sum(1 for d in plan.drives if d.control)
+        one_round, refresh = poll_round_s(plan)
+        print(
+            f"  {plan.name}: {plan.port}, {plan.protocol}, {plan.baudrate} baud "
+            f"{plan.databits}{plan.parity}{plan.stopbits}, {len(plan.drives)} drive(s) "
+            f"({controlled} under bus control)"
+        )
+        print(
+            f"    every drive polled within {one_round * 1000:.1f} ms; "
+            f"every monitored value refreshed within {refresh:.2f} s"
+        )
+    model = config.model
+    adapters = [name for name in ("http", "mqtt", "metrics") if getattr(model, name) is not None]
+    print(f"  adapters: {', '.join(adapters) or 'none'}; on_shutdown: {model.on_shutdown}")
+    return 0
+
+
+async def run(path: Path, *, demo: bool) -> int:
+    """Run the daemon until SIGTERM/SIGINT."""
+    from fcmaster.service import Service
+
+    config = config_module.load(path)
+    logsetup.configure(config.model.logging.level, config.model.logging.format)
+    log.info("config.loaded", path=str(path), demo=demo)
+    await Service(config).run()
+    return 0

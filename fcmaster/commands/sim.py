@@ -1,0 +1,83 @@
+"""`fcmaster sim`: serve simulated drives on pseudo-terminals until SIGINT or SIGTERM.
+
+:func:`serve` takes any number of buses, each a :class:`SimBus` (line settings, a list of
+``(address, drive settings)`` and an optional link), so ``fcmaster sim --config FILE`` only
+has to turn the config's buses into that list.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import signal
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TextIO
+
+from fcmaster.clock import Clock, MonotonicClock
+from fcmaster.errors import UsageError
+from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line, parse_faults
+
+
+@dataclass(slots=True, frozen=True)
+class SimBus:
+    """One simulated line to serve: its settings, its drives, and where to link its pty."""
+
+    settings: LineSettings
+    drives: Sequence[tuple[int, DriveSettings]]
+    link: str | None = None
+
+
+async def run(args: argparse.Namespace) -> int:
+    """Serve the one line the command-line options describe."""
+    delay_ms = args.response_delay_ms
+    line = LineSettings(
+        name=args.name,
+        protocol=args.protocol,
+        baudrate=args.baudrate,
+        parity=args.parity,
+        stopbits=args.stopbits,
+        faults=parse_faults(args.faults),
+    )
+    drive = DriveSettings(response_delay_s=None if delay_ms is None else delay_ms / 1000.0)
+    return await serve([SimBus(line, [(address, drive) for address in args.addresses], args.link)])
+
+
+async def serve(
+    buses: Sequence[SimBus],
+    *,
+    clock: Clock | None = None,
+    out: TextIO | None = None,
+    stop: asyncio.Event | None = None,
+) -> int:
+    """Serve every bus on its own pty; print ``BUS PATH`` for each; run until ``stop``.
+
+    ``stop`` defaults to an event set by SIGINT or SIGTERM. Links are removed on the way
+    out, however it ends.
+    """
+    clock = clock or MonotonicClock()
+    out = out or sys.stdout
+    names = [bus.settings.name for bus in buses]
+    if len(set(names)) != len(names):
+        raise UsageError(f"bus names must differ: {names}")
+    loop = asyncio.get_running_loop()
+    handled: list[signal.Signals] = []
+    if stop is None:
+        stop = asyncio.Event()
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(signum, stop.set)
+            handled.append(signum)
+    try:
+        async with contextlib.AsyncExitStack() as stack:
+            for bus in buses:
+                line = build_line(bus.settings, bus.drives, clock=clock)
+                server = PtyServer(line, clock=clock, link=bus.link)
+                await stack.enter_async_context(server)
+                print(f"{bus.settings.name} {server.device}", file=out, flush=True)
+            await stop.wait()
+    finally:
+        for signum in handled:
+            loop.remove_signal_handler(signum)
+    return 0

@@ -1,0 +1,209 @@
+"""The daemon: one BusMaster per line, the fleet state, the hub and the adapters.
+
+Theory of operation
+-------------------
+:class:`Service` builds everything from a validated :class:`~fcmaster.config.Config`:
+a :class:`~fcmaster.hub.Hub`, a :class:`~fcmaster.state.FleetState` that publishes to it,
+and a BusMaster per line reporting to the fleet state. Each line owns its port and reopens
+it by itself when it is lost, so one unplugged adapter never stops the other lines.
+``sim://NAME`` ports get an in-process simulated line with the drives the config names.
+
+Shutdown (SIGTERM, SIGINT, or :meth:`Service.stop`) is orderly: with ``on_shutdown: stop``
+every ``control: bus`` drive is sent a stop and the service waits (bounded) for the
+results; with ``hold`` the drives are left as they are and their own control-word timeout
+acts. Then the lines close, and every command still queued ends ``cancelled``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import importlib
+import signal
+from collections.abc import Callable
+from contextlib import AbstractAsyncContextManager, AsyncExitStack
+from typing import Any
+
+import structlog
+
+from fcmaster.adapters.gateway import LineInfo
+from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.echo import EchoCancellingTransport
+from fcmaster.bus.master import BusMaster
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.bus.serial import SerialTransport
+from fcmaster.bus.transport import Transport
+from fcmaster.clock import Clock, MonotonicClock
+from fcmaster.config import Config
+from fcmaster.hub import Hub
+from fcmaster.state import FleetState, LineChanged
+
+log = structlog.get_logger("fcmaster.service")
+
+STATS_INTERVAL_S = 5.0
+SHUTDOWN_STOP_TIMEOUT_S = 5.0
+
+TransportFactory = Callable[[LinePlan], Transport]
+
+# config section → the adapter class it switches on, as "module:Class". Each adapter is an
+# async context manager built as Class(section_model, gateway, demo=bool).
+ADAPTERS = {
+    "http": "fcmaster.adapters.http:HttpAdapter",
+    "mqtt": "fcmaster.adapters.mqtt:MqttAdapter",
+}
+
+
+class Service:
+    """Everything `fcmaster run` runs, for one configuration."""
+
+    def __init__(
+        self,
+        config: Config,
+        *,
+        clock: Clock | None = None,
+        transport_factory: TransportFactory | None = None,
+        demo: bool = False,
+    ) -> None:
+        self.config = config
+        self.demo = demo
+        self.clock = clock or MonotonicClock()
+        self.hub = Hub()
+        self.fleet = FleetState(config.lines, emit=self.hub.publish, clock=self.clock)
+        self._transport_factory = transport_factory or self._default_transport
+        self.masters: dict[str, BusMaster] = {}
+        self._stopping = asyncio.Event()
+
+    def _default_transport(self, plan: LinePlan) -> Transport:
+        if plan.port.startswith("sim://"):
+            from fcmaster.sim.service import sim_transport
+
+            bus = next(b for b in self.config.model.buses if b.name == plan.name)
+            transport: Transport = sim_transport(plan, bus.simulation or {}, clock=self.clock)
+        else:
+            transport = SerialTransport(
+                plan.port,
+                baudrate=plan.baudrate,
+                parity=plan.parity,
+                stopbits=plan.stopbits,
+                databits=plan.databits,
+                rs485=plan.rs485,
+            )
+        return EchoCancellingTransport(transport) if plan.echo else transport
+
+    def drive_plan(self, name: str) -> DrivePlan | None:
+        """A drive's configuration, or None when no drive has that name."""
+        for plan in self.config.lines:
+            for drive in plan.drives:
+                if drive.name == name:
+                    return drive
+        return None
+
+    def lines(self) -> list[LineInfo]:
+        """Every line with its statistics."""
+        now = self.clock.now()
+        infos = []
+        for plan in self.config.lines:
+            master = self.masters.get(plan.name)
+            infos.append(
+                LineInfo(
+                    name=plan.name,
+                    port=plan.port,
+                    protocol=plan.protocol,
+                    baudrate=plan.baudrate,
+                    up=master is not None and master.is_up,
+                    drives=tuple(d.name for d in plan.drives),
+                    stats=master.stats.to_json(now) if master is not None else {},
+                )
+            )
+        return infos
+
+    def master_of(self, drive: str) -> BusMaster:
+        """The BusMaster of the line drive ``drive`` hangs on; KeyError if none."""
+        state = self.fleet.find(drive)
+        if state is None:
+            raise KeyError(drive)
+        return self.masters[state.bus]
+
+    async def execute(self, drive: str, command: Command) -> CommandResult:
+        """Carry out ``command`` on the drive called ``drive``, wherever it hangs."""
+        try:
+            master = self.master_of(drive)
+        except KeyError:
+            return CommandResult(outcome=Outcome.INVALID, reason=f"no drive called {drive!r}")
+        return await master.execute(drive, command)
+
+    def stop(self) -> None:
+        """Ask :meth:`run` to shut down."""
+        self._stopping.set()
+
+    async def run(self, *, install_signals: bool = True) -> None:
+        """Run until :meth:`stop` or SIGTERM/SIGINT; then shut down in order."""
+        loop = asyncio.get_running_loop()
+        if install_signals:
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                loop.add_signal_handler(sig, self.stop)
+        try:
+            async with AsyncExitStack() as stack:
+                for plan in self.config.lines:
+                    master = BusMaster(
+                        plan,
+                        codec=codec_for(plan),
+                        transport=self._transport_factory(plan),
+                        clock=self.clock,
+                        observer=self.fleet,
+                    )
+                    self.masters[plan.name] = await stack.enter_async_context(master)
+                for section, target in ADAPTERS.items():
+                    model = getattr(self.config.model, section)
+                    if model is not None:
+                        await stack.enter_async_context(self._adapter(target, model))
+                log.info(
+                    "service.started",
+                    lines=len(self.masters),
+                    drives=sum(len(p.drives) for p in self.config.lines),
+                )
+                stats = asyncio.create_task(self._publish_stats(), name="service.stats")
+                try:
+                    await self._stopping.wait()
+                finally:
+                    stats.cancel()
+                log.info("service.stopping", on_shutdown=self.config.model.on_shutdown)
+                if self.config.model.on_shutdown == "stop":
+                    await self._stop_drives()
+        finally:
+            if install_signals:
+                for sig in (signal.SIGTERM, signal.SIGINT):
+                    loop.remove_signal_handler(sig)
+        log.info("service.stopped")
+
+    def _adapter(self, target: str, model: Any) -> AbstractAsyncContextManager[Any]:
+        module, _, name = target.partition(":")
+        adapter: AbstractAsyncContextManager[Any] = getattr(importlib.import_module(module), name)(
+            model, self, demo=self.demo
+        )
+        return adapter
+
+    async def _stop_drives(self) -> None:
+        """Send a stop to every bus-controlled drive and wait, bounded, for the results."""
+        orders = [
+            master.execute(drive.name, Command(action=Action.STOP, actor="shutdown"))
+            for master in self.masters.values()
+            for drive in master.plan.drives
+            if drive.control
+        ]
+        if not orders:
+            return
+        try:
+            async with asyncio.timeout(SHUTDOWN_STOP_TIMEOUT_S):
+                await asyncio.gather(*orders)
+        except TimeoutError:
+            log.warning("service.shutdown_stop_timed_out")
+
+    async def _publish_stats(self) -> None:
+        while True:
+            await self.clock.sleep(STATS_INTERVAL_S)
+            now = self.clock.now()
+            for name, master in self.masters.items():
+                self.hub.publish(
+                    LineChanged(bus=name, up=master.is_up, stats=master.stats.to_json(now))
+                )

@@ -1,0 +1,83 @@
+"""Building a simulated line from settings: the one place that knows every vendor's parts.
+
+A vendor adds its simulator by adding a :class:`SimProtocol` to :data:`SIM_PROTOCOLS`: the
+framer that cuts its requests out of the byte stream and a factory for its drives. The
+line itself stays vendor-neutral.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Final
+
+from fcmaster.clock import Clock
+from fcmaster.errors import UsageError
+from fcmaster.protocol.danfoss_fc.framer import FcFramer
+from fcmaster.sim.danfoss_fc.drive import FcSimDrive
+from fcmaster.sim.line import RequestFramer, SimDrive, SimLine
+from fcmaster.sim.settings import DriveSettings, LineSettings
+
+# address, settings, the line's settings, power-up time → a drive
+DriveFactory = Callable[[int, DriveSettings, LineSettings, float], SimDrive]
+
+
+@dataclass(slots=True, frozen=True)
+class SimProtocol:
+    """What the simulator needs of one protocol."""
+
+    framer_factory: Callable[[], RequestFramer]
+    new_drive: DriveFactory
+    addresses: range  # addresses a drive may have
+
+
+def _fc_drive(address: int, settings: DriveSettings, line: LineSettings, now: float) -> SimDrive:
+    return FcSimDrive(address, settings, now=now, line=line)
+
+
+SIM_PROTOCOLS: Final[dict[str, SimProtocol]] = {
+    "danfoss-fc": SimProtocol(FcFramer, _fc_drive, range(1, 127)),
+}
+
+
+def build_line(
+    line: LineSettings,
+    drives: Iterable[tuple[int, DriveSettings]],
+    *,
+    clock: Clock,
+    rng: random.Random | None = None,
+) -> SimLine:
+    """A line of ``line.protocol`` drives, one per ``(address, settings)``, powered up now.
+
+    ``rng`` defaults to ``random.Random(line.faults.seed)`` (seed 0 when the plan has none),
+    so the same settings give the same faults. Raises UsageError for an unknown protocol,
+    a bad or repeated address, or settings a drive cannot take.
+    """
+    protocol = SIM_PROTOCOLS.get(line.protocol)
+    if protocol is None:
+        known = ", ".join(SIM_PROTOCOLS)
+        raise UsageError(f"no simulated drives for protocol {line.protocol!r} yet (have: {known})")
+    drives = list(drives)
+    addresses = [address for address, _ in drives]
+    bad = [a for a in addresses if a not in protocol.addresses]
+    if bad:
+        raise UsageError(f"{line.protocol} addresses are {_span(protocol.addresses)}, not {bad}")
+    repeated = sorted({a for a in addresses if addresses.count(a) > 1})
+    if repeated:
+        raise UsageError(f"addresses {repeated} appear more than once on line {line.name}")
+    now = clock.now()
+    return SimLine(
+        drives=[protocol.new_drive(address, settings, line, now) for address, settings in drives],
+        framer_factory=protocol.framer_factory,
+        baudrate=line.baudrate,
+        char_bits=line.char_bits,
+        clock=clock,
+        faults=line.faults,
+        drive_faults={a: s.faults for a, s in drives if s.faults is not None},
+        rng=rng or random.Random(line.faults.seed or 0),
+    )
+
+
+def _span(addresses: range) -> str:
+    return f"{addresses.start}-{addresses.stop - 1}"

@@ -1,0 +1,55 @@
+"""How a simulated line and its drives start out: plain frozen data, for every vendor.
+
+A vendor's simulated drive reads what it understands from :class:`DriveSettings`: the
+motor, the load, its response delay, and parameter values written the way its manual
+writes them (``{"3-41": 5.0}`` for an FC drive, in the parameter's unit). The YAML config
+will map a bus's ``simulation:`` section onto these.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from fcmaster.errors import UsageError
+from fcmaster.sim.faults import FaultPlan
+from fcmaster.sim.motor import MotorRating
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class DriveSettings:
+    """One simulated drive's starting point (vendor-neutral)."""
+
+    response_delay_s: float | None = None  # None: the vendor's factory setting
+    rating: MotorRating = field(default_factory=MotorRating)
+    load: float = 0.7  # load torque at rated speed, fraction of rated torque
+    load_exponent: float = 2.0  # 2: pump or fan; 0: constant torque
+    reference_100_hz: float | None = None  # what 100 % reference means (FC: 3-03)
+    max_frequency_hz: float | None = None  # the output's upper limit (FC: 4-14)
+    parameters: Mapping[str, float] = field(default_factory=dict)  # manual notation → value
+    faults: FaultPlan | None = None  # what goes wrong with this drive's replies
+    local: bool = False  # in local (hand) operation: ignores bus commands
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class LineSettings:
+    """A simulated line: protocol, character format and line-wide faults."""
+
+    name: str = "line1"
+    protocol: str = "danfoss-fc"
+    baudrate: int = 19200
+    parity: str = "E"  # N | E | O
+    stopbits: int = 1
+    databits: int = 8
+    faults: FaultPlan = field(default_factory=FaultPlan)
+
+    def __post_init__(self) -> None:
+        if self.parity not in ("N", "E", "O"):
+            raise UsageError(f"parity {self.parity!r} is not N, E or O")
+        if self.stopbits not in (1, 2) or self.databits not in (7, 8) or self.baudrate <= 0:
+            raise UsageError("stop bits are 1 or 2, data bits 7 or 8, baud rate positive")
+
+    @property
+    def char_bits(self) -> int:
+        """Bits per character on the wire: start, data, parity (unless N), stop."""
+        return 1 + self.databits + (self.parity != "N") + self.stopbits
