@@ -49,13 +49,24 @@ class MonotonicClock:
 
     async def sleep(self, seconds: float) -> None:
         """Wait ``seconds`` on the event loop."""
-        await asyncio.sleep(seconds)
+        await self.sleep_until(time.monotonic() + seconds)
 
     async def sleep_until(self, deadline: float) -> None:
-        """Wait until ``deadline``; return at once if it has passed."""
+        """Wait until ``deadline``; return at once if it has passed.
+
+        A long wait is split: the kernel wakes a timer late by a share of its length, so
+        the first sleep ends a little early and a short second one lands on the deadline.
+        """
         delay = deadline - time.monotonic()
-        if delay > 0:
-            await asyncio.sleep(delay)
+        if delay <= 0:
+            return
+        margin = max(0.001, delay * 0.01)
+        if delay > 2 * margin:
+            await asyncio.sleep(delay - margin)
+            delay = deadline - time.monotonic()
+            if delay <= 0:
+                return
+        await asyncio.sleep(delay)
 
 
 def lower_timer_slack() -> bool:

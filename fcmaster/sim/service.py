@@ -15,7 +15,9 @@ The bus's optional ``simulation:`` section says what the drives do::
       load: 0.7                            # load torque at rated speed, fraction of rated
       drives:                              # by address; overrides the keys above
         3: {load: 0.9, faults: "silent_at=60-70", local: false,
-            response_delay_ms: 20, parameters: {"3-41": 5.0}}
+            response_delay_ms: 20, parameters: {"3-41": 5.0},
+            running_hz: 35,                          # found running, as a former master left it
+            warning: {number: 59, every_s: 60, for_s: 15}}   # a warning that comes and goes
 
 Mistakes raise ConfigError naming the key path.
 """
@@ -37,7 +39,9 @@ from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.sim.transport import SimTransport
 
 _LINE_KEYS: Final = frozenset({"seed", "faults", "response_delay_ms", "load", "drives"})
-_DRIVE_KEYS: Final = frozenset({"faults", "response_delay_ms", "load", "local", "parameters"})
+_DRIVE_KEYS: Final = frozenset(
+    {"faults", "response_delay_ms", "load", "local", "parameters", "running_hz", "warning"}
+)
 _RPM_PER_HZ: Final = 29.0  # a four-pole motor with 3 % slip: 1450 rpm at 50 Hz
 
 
@@ -97,9 +101,23 @@ def _drive(
             parameters={str(k): float(v) for k, v in dict(own.get("parameters") or {}).items()},
             faults=_faults(own.get("faults"), f"{here}.faults") if "faults" in own else None,
             local=bool(own.get("local", False)),
+            running_hz=float(own["running_hz"]) if "running_hz" in own else None,
+            warning_cycle=_warning_cycle(own.get("warning"), f"{here}.warning"),
         )
     except (TypeError, ValueError) as exc:
         raise ConfigError([(here, str(exc))]) from exc
+
+
+def _warning_cycle(value: object, where: str) -> tuple[int, float, float] | None:
+    """``{number: 59, every_s: 60, for_s: 15}``: a warning that comes and goes."""
+    if value is None:
+        return None
+    if not isinstance(value, Mapping) or set(value) != {"number", "every_s", "for_s"}:
+        raise ConfigError([(where, "write it as {number: 59, every_s: 60, for_s: 15}")])
+    number, every_s, for_s = int(value["number"]), float(value["every_s"]), float(value["for_s"])
+    if not 0 < for_s < every_s:
+        raise ConfigError([(where, "for_s must be above 0 and below every_s")])
+    return number, every_s, for_s
 
 
 def _faults(value: object, where: str) -> FaultPlan:

@@ -29,6 +29,8 @@ class DriveSettings:
     parameters: Mapping[str, float] = field(default_factory=dict)  # manual notation → value
     faults: FaultPlan | None = None  # what goes wrong with this drive's replies
     local: bool = False  # in local (hand) operation: ignores bus commands
+    running_hz: float | None = None  # already running at power-up, as a former master left it
+    warning_cycle: tuple[int, float, float] | None = None  # (warning number, every_s, for_s)
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)

@@ -31,6 +31,7 @@ from fcmaster.protocol.danfoss_fc.error_codes import (
     WRONG_DATA_TYPE,
 )
 from fcmaster.protocol.danfoss_fc.parameters import PARAMETERS, DataType, ParameterSpec
+from fcmaster.protocol.danfoss_fc.profile import encode_reference
 from fcmaster.protocol.danfoss_fc.telegram import (
     IND_TEXT_WRITE,
     RequestAk,
@@ -70,6 +71,10 @@ _BOUNDS: Final[dict[DataType | None, tuple[int, int]]] = {
     DataType.V2: (0, 0xFFFF),
     DataType.UINT32: (0, 0xFFFF_FFFF),
 }
+
+
+_SPIN_UP_S: Final = 120.0  # how long before power-up a drive found running was started
+_RUNNING_WORD: Final = 0x047C  # start, ramp 1, data valid (§8.3)
 
 
 class FcSimDrive:
@@ -117,11 +122,19 @@ class FcSimDrive:
             overrides[414] = round(settings.max_frequency_hz * 10)
         overrides.update(overrides_from_values(settings.parameters))
         self.parameters = ParameterStore(overrides)
+        # A drive found running was started a while ago; let its motor reach speed since.
+        started = now - _SPIN_UP_S if settings.running_hz else now
         self.motor = Motor(
-            self._rating(rating), now, load=settings.load, load_exponent=settings.load_exponent
+            self._rating(rating), started, load=settings.load, load_exponent=settings.load_exponent
         )
-        self.control = FcControl(self.parameters, self.motor, now, local=settings.local)
+        self.control = FcControl(self.parameters, self.motor, started, local=settings.local)
+        if settings.running_hz:
+            reference = settings.running_hz / (self.parameters[303] / 1000.0) * 100.0
+            self.control.apply(_RUNNING_WORD, encode_reference(reference), started)
+            self.control.advance(now)
         self.texts = identification_texts(address, rating)
+        self._warning_cycle = settings.warning_cycle
+        self._born = now
 
     @property
     def address(self) -> int:
@@ -145,6 +158,8 @@ class FcSimDrive:
             request = decode_telegram(frame, from_drive=False)
         except ProtocolError:
             return None
+        if self._warning_cycle is not None:
+            self._cycle_warning(now)
         self.control.apply(request.pcd1, request.pcd2, now)
         pke, ind, pwe, text = self._parameter_channel(request, now)
         if request.is_broadcast:
@@ -155,6 +170,15 @@ class FcSimDrive:
             pke=pke, ind=ind, pwe=pwe, text=text,
         )  # fmt: skip
         return encode_telegram(reply)
+
+    def _cycle_warning(self, now: float) -> None:
+        """A recurring warning: active for ``for_s`` at the start of every ``every_s``."""
+        assert self._warning_cycle is not None
+        number, every_s, for_s = self._warning_cycle
+        if (now - self._born) % every_s < for_s:
+            self.control.raise_warning(number, now)
+        else:
+            self.control.clear_warning(number, now)
 
     def read(self, pnu: int, index: int, now: float) -> int:
         """The raw value of ``pnu`` at ``now``; raise :class:`Refused` if there is none."""
