@@ -3,21 +3,25 @@
 from __future__ import annotations
 
 from fcmaster.bus.transport import Transport
+from fcmaster.errors import ReplyTimeout
 
 
 class EchoCancellingTransport:
     """Wraps a transport and removes the echo of each request from what is read back.
 
-    The echo comes first and byte for byte; as soon as a byte differs (a collision, or an
-    adapter that did not echo after all) the rest is passed on untouched, so a real reply
-    is never eaten.
+    The echo comes first and byte for byte. Bytes that match it so far are held back until
+    the whole echo is in, and only then dropped; as soon as a byte differs (a collision, or
+    an adapter that did not echo after all) the held bytes and the rest are passed on
+    untouched, so a reply that merely starts like the request (FC: STX, LGE, ADR) is never
+    eaten.
     """
 
-    __slots__ = ("_expect", "_inner")
+    __slots__ = ("_expect", "_held", "_inner")
 
     def __init__(self, inner: Transport) -> None:
         self._inner = inner
-        self._expect = b""
+        self._expect = b""  # the echo still awaited, whole
+        self._held = b""  # bytes read that match the start of ``_expect``
 
     async def open(self) -> None:
         """Open the wrapped transport."""
@@ -35,21 +39,28 @@ class EchoCancellingTransport:
     async def read(self, deadline: float) -> bytes:
         """Read past the echo."""
         while True:
-            data = await self._inner.read(deadline)
+            cut_short = False
+            try:
+                data = await self._inner.read(deadline)
+            except ReplyTimeout:
+                if not self._held:
+                    raise
+                data, cut_short = b"", True  # an echo cut short is no echo
             if not self._expect:
                 return data
-            matched = 0
-            limit = min(len(data), len(self._expect))
-            while matched < limit and data[matched] == self._expect[matched]:
-                matched += 1
-            if matched < limit:  # diverged: no (more) echo
+            data, self._held = self._held + data, b""
+            expect = self._expect
+            if data[: len(expect)] == expect:  # the whole echo: drop it
+                self._expect, data = b"", data[len(expect) :]
+            elif expect.startswith(data) and not cut_short:  # an echo so far: wait for the rest
+                self._held = data
+                continue
+            else:  # diverged, or cut short: no echo, hand everything back
                 self._expect = b""
-            else:
-                self._expect = self._expect[matched:]
-            if matched < len(data):
-                return data[matched:]
+            if data:
+                return data
 
     def discard_input(self) -> bytes:
         """Drop unread input; an echo still expected is dropped with it."""
-        self._expect = b""
-        return self._inner.discard_input()
+        held, self._held, self._expect = self._held, b"", b""
+        return held + self._inner.discard_input()

@@ -122,6 +122,7 @@ class BusMaster:
         self._framer = codec.new_framer()
         self._pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
         self._wake = asyncio.Event()
+        self._tried = asyncio.Event()  # the port has been tried once since __aenter__
         self._task: asyncio.Task[None] | None = None
         self._up = False
         self._down_reason = "not started"
@@ -135,7 +136,18 @@ class BusMaster:
         if self._task is not None:
             raise RuntimeError("BusMaster is already running; it is not re-entrant")
         self._closing = False
+        self._tried.clear()
         self._task = asyncio.create_task(self._run(), name=f"bus[{self.plan.name}].master")
+        # Return once the port has been tried: a command sent right away then finds the line
+        # up, or is told why it is down, instead of being cancelled as "not started".
+        tried = asyncio.ensure_future(self._tried.wait())
+        try:
+            await asyncio.wait((tried, self._task), return_when=asyncio.FIRST_COMPLETED)
+        except BaseException:
+            await self.close()
+            raise
+        finally:
+            tried.cancel()
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:
@@ -145,16 +157,21 @@ class BusMaster:
         """Stop the loop, end every queued command as cancelled, close the port."""
         self._closing = True
         task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            try:
-                await task
-            except asyncio.CancelledError:
-                current = asyncio.current_task()
-                if current is not None and current.cancelling():
-                    raise
-        self._resolve(self.planner.cancel_all(f"{self.plan.name} shut down"))
-        await self._transport.close()
+        try:
+            if task is not None:
+                task.cancel()
+                try:
+                    await task
+                except asyncio.CancelledError:
+                    current = asyncio.current_task()
+                    if current is not None and current.cancelling():
+                        raise
+        finally:  # even if the loop died of a bug: every command still gets its one result
+            self._up = False
+            self._down_reason = "shut down"
+            self.planner.on_line_down()
+            self._resolve(self.planner.cancel_all(f"{self.plan.name} shut down"))
+            await self._transport.close()
 
     @property
     def is_up(self) -> bool:
@@ -174,14 +191,16 @@ class BusMaster:
             self._resolve(
                 [
                     Completion(
-                        (future,), command, name or "*",
+                        (future,),
+                        command,
+                        name or "*",
                         CommandResult(
                             outcome=Outcome.CANCELLED,
                             reason=f"{self.plan.name} is down: {self._down_reason}",
                         ),
                     )
                 ]
-            )  # fmt: skip
+            )
         else:
             self._resolve(self.planner.submit(name, command, future))
             self._wake.set()
@@ -200,6 +219,7 @@ class BusMaster:
                 delay *= 0.8 + 0.4 * self._rng.random()
                 attempt += 1
                 self._log.warning("bus.open_failed", error=str(exc), retry_in_s=round(delay, 2))
+                self._tried.set()
                 await self._clock.sleep(delay)
                 continue
             attempt = 0
@@ -208,6 +228,7 @@ class BusMaster:
             self.stats.up_since = now
             self._log.info("bus.opened")
             self._observer.line_availability(self.plan.name, True, "", now)
+            self._tried.set()
             try:
                 await self._serve()
             except PortError as exc:
@@ -222,6 +243,7 @@ class BusMaster:
         now = self._clock.now()
         self._log.warning("bus.lost", error=reason, recent_frames=list(self.recent_frames))
         self._resolve(self.planner.cancel_all(f"{self.plan.name} lost its port: {reason}"))
+        self.planner.on_line_down()  # when it is back, adopt the drives as at start
         for slot in self.planner.slots:
             if slot.online:
                 slot.online = None
@@ -373,9 +395,11 @@ class BusMaster:
                 self._log.info("drive.came_online", drive=drive.name, address=drive.address)
             else:
                 self._log.warning(
-                    "drive.went_offline", drive=drive.name, address=drive.address,
+                    "drive.went_offline",
+                    drive=drive.name,
+                    address=drive.address,
                     recent_frames=list(self.recent_frames),
-                )  # fmt: skip
+                )
             self._deferred.append(
                 partial(self._observer.drive_availability, self.plan.name, drive, online, now)
             )
@@ -385,10 +409,13 @@ class BusMaster:
             result = completion.result
             command = completion.command
             self._log.info(
-                "command.completed", actor=command.actor or "-", drive=completion.drive,
-                command=command.action.value, outcome=result.outcome.value,
+                "command.completed",
+                actor=command.actor or "-",
+                drive=completion.drive,
+                command=command.action.value,
+                outcome=result.outcome.value,
                 reason=result.reason or None,
-            )  # fmt: skip
+            )
             for ticket in completion.tickets:
                 if isinstance(ticket, asyncio.Future) and not ticket.done():
                     ticket.set_result(result)
@@ -456,18 +483,21 @@ class Drive:
         """Carry out any command."""
         return await self._master.execute(self.plan.name, command)
 
-    def reference_pct(self, frequency_hz: float | None, reference_pct: float | None) -> (
-        float | None
-    ):  # fmt: skip
+    def reference_pct(
+        self, frequency_hz: float | None, reference_pct: float | None
+    ) -> float | None:
         """A reference in % of nominal frequency from whichever of the two is given."""
         if frequency_hz is not None:
             return frequency_hz / self.plan.nominal_frequency_hz * 100.0
         return reference_pct
 
     async def start(
-        self, *, frequency_hz: float | None = None, reference_pct: float | None = None,
+        self,
+        *,
+        frequency_hz: float | None = None,
+        reference_pct: float | None = None,
         actor: str = "",
-    ) -> CommandResult:  # fmt: skip
+    ) -> CommandResult:
         """Run, optionally at a new reference."""
         return await self.execute(
             Command(
@@ -478,9 +508,12 @@ class Drive:
         )
 
     async def set_reference(
-        self, *, frequency_hz: float | None = None, reference_pct: float | None = None,
+        self,
+        *,
+        frequency_hz: float | None = None,
+        reference_pct: float | None = None,
         actor: str = "",
-    ) -> CommandResult:  # fmt: skip
+    ) -> CommandResult:
         """Change the reference without changing the motion."""
         pct = self.reference_pct(frequency_hz, reference_pct)
         if pct is None:
@@ -526,13 +559,22 @@ class Drive:
         )
 
     async def write(
-        self, parameter: str, value: float, *, index: int = 0, persist: bool = False,
+        self,
+        parameter: str,
+        value: float,
+        *,
+        index: int = 0,
+        persist: bool = False,
         actor: str = "",
-    ) -> CommandResult:  # fmt: skip
+    ) -> CommandResult:
         """Write a parameter (``persist``: to non-volatile memory too)."""
         return await self.execute(
             Command(
-                action=Action.WRITE, parameter=parameter, index=index, value=value,
-                persist=persist, actor=actor,
+                action=Action.WRITE,
+                parameter=parameter,
+                index=index,
+                value=value,
+                persist=persist,
+                actor=actor,
             )
-        )  # fmt: skip
+        )

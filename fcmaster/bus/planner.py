@@ -22,14 +22,17 @@ every exchange, which keeps the drive's control-word watchdog fed. Before the ma
 the drive's state it sends no command (intent None) unless ``on_start: stop``; the first
 good reply is *adopted*: a running drive is commanded to keep running at its present output
 and direction, a stopped one to stay stopped. A drive that returns from being demoted is
-adopted again unless the last command was a stop, so a drive that comes back is never
-started by the master on its own. A trip (status fault rising) turns the intent into a stop,
+adopted again unless the last command was a stop, and so is every drive once the line has
+been down (:meth:`Planner.on_line_down`), so a drive that comes back is never started by
+the master on its own. A trip (status fault rising) turns the intent into a stop,
 so a later reset does not restart the motor; a new start is needed.
 
 Every command ends exactly once, reported as a :class:`Completion`: the master resolves
 the caller's future from it. A stop supersedes motion commands of the same drive that are
 still queued (they end ``cancelled``); a newer reference coalesces into a queued one (both
-end with the newer one's result).
+end with the newer one's result). Neither touches a command whose step is in flight (the
+last step :meth:`Planner.next_step` handed out and not yet reported back): the drive may
+already be acting on it, and its reply must still find it at the head of its queue.
 """
 
 from __future__ import annotations
@@ -49,7 +52,8 @@ _STOPPING = (Motion.STOP, Motion.COAST, Motion.QUICK_STOP)
 _MOTION_ACTIONS = frozenset(
     (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE)
 )
-# Actions that change only part of the commanded state, so the rest must be known first.
+# Actions that change only part of the commanded state, so the rest must be known first
+# (so does a start that keeps the present reference).
 _RELATIVE_ACTIONS = frozenset((Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE, Action.RESET))
 
 
@@ -157,6 +161,7 @@ class Planner:
         self._urgent: deque[Pending] = deque()
         self._normal: deque[Pending] = deque()
         self._next_poll = 0
+        self._in_flight: Pending | None = None  # the command whose step is on the wire
 
     # -- commands in -------------------------------------------------------------------
 
@@ -203,6 +208,11 @@ class Planner:
                 reason = _beyond_limits(target.plan, command.reference_pct)
                 if reason:
                     return _result(Outcome.NOT_ALLOWED, reason)
+            try:  # NaN, or beyond what the wire carries: it would fail in next_step instead
+                intent = ControlIntent(reference_pct=command.reference_pct)
+                self.codec.control(0 if slot is None else slot.address, intent)
+            except UsageError as exc:
+                return _result(Outcome.INVALID, str(exc))
         if action in (Action.READ, Action.WRITE) and slot is not None:
             try:
                 self._build_access(slot, command)
@@ -222,6 +232,7 @@ class Planner:
                 pending.command.action in _MOTION_ACTIONS
                 and pending.attempts == 0
                 and pending.part == 0
+                and pending is not self._in_flight
                 and (slot is None or pending.slot is slot or pending.slot is None)
             ):
                 result = _result(Outcome.CANCELLED, f"superseded by {command.action}")
@@ -232,15 +243,22 @@ class Planner:
         return ended
 
     def _coalesce(self, pending: Pending) -> bool:
-        for queued in self._normal:
+        # Only into the newest queued command that sets this drive's reference, so that a
+        # start with a reference queued in between cannot end up overriding the newest one;
+        # and only while its telegram is not built yet (not on the wire, not half sent).
+        for queued in reversed(self._normal):
+            if queued.slot is not pending.slot or queued.command.reference_pct is None:
+                continue
             if (
                 queued.command.action is Action.SET_REFERENCE
-                and queued.slot is pending.slot
                 and queued.attempts == 0
+                and queued.intent is None
+                and queued is not self._in_flight
             ):
                 queued.command = pending.command
                 queued.tickets.extend(pending.tickets)
                 return True
+            return False
         return False
 
     def cancel_all(self, reason: str) -> list[Completion]:
@@ -250,6 +268,17 @@ class Planner:
         self._urgent.clear()
         self._normal.clear()
         return ended
+
+    def on_line_down(self) -> None:
+        """The port was lost or shut: adopt each drive again when it is next heard from.
+
+        A commanded stop is kept, as it is safe to repeat; a commanded motion is not, since
+        the drive may have stopped meanwhile (its control-word timeout) and must not be
+        started again by the master on its own.
+        """
+        for slot in self.slots:
+            if slot.intent is not None and slot.intent.motion not in _STOPPING:
+                slot.intent = None
 
     @property
     def has_commands(self) -> bool:
@@ -261,6 +290,7 @@ class Planner:
     def next_step(self, now: float) -> Step | None:
         """The next exchange to carry out; None: nothing to do before :meth:`next_wakeup`."""
         queue = self._urgent or self._normal
+        self._in_flight = queue[0] if queue else None
         if queue:
             return self._command_step(queue[0])
         for slot in self.slots:
@@ -297,7 +327,10 @@ class Planner:
                 pending.intent is None
                 and slot is not None
                 and slot.intent is None
-                and command.action in _RELATIVE_ACTIONS
+                and (
+                    command.action in _RELATIVE_ACTIONS
+                    or (command.action is Action.START and command.reference_pct is None)
+                )
             ):
                 # Learn what the drive is doing before changing part of it.
                 exchange = self.codec.poll(slot.address, None, None)
@@ -323,9 +356,13 @@ class Planner:
         if command.value is None:
             raise UsageError("write needs a value")
         return self.codec.write(
-            slot.address, parameter, command.index, command.value, slot.intent,
+            slot.address,
+            parameter,
+            command.index,
+            command.value,
+            slot.intent,
             persist=command.persist,
-        )  # fmt: skip
+        )
 
     def _targets(self, slot: DriveSlot | None) -> list[DriveSlot]:
         return [slot] if slot is not None else [s for s in self.slots if s.plan.control]
@@ -335,6 +372,7 @@ class Planner:
     def on_sent(self, step: Step, now: float) -> Report:
         """A step that expects no reply (broadcast, reset without answer) went out."""
         report = Report()
+        self._in_flight = None
         if step.pending is not None:
             self._advance(step.pending, report, None)
         return report
@@ -342,16 +380,20 @@ class Planner:
     def on_reply(self, step: Step, reply: Reply, now: float) -> Report:
         """A valid reply to ``step`` arrived."""
         report = Report()
+        self._in_flight = None
         slot = step.slot
-        if slot is not None:
-            self._heard(slot, reply, report)
+        tripped = slot is not None and self._heard(slot, reply, report)
         if step.pending is not None:
             self._advance(step.pending, report, reply)
+        if tripped and slot is not None and slot.intent is not None:
+            # After the command's own intent: a trip in the reply to a start still stops.
+            slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP)
         return report
 
     def on_failure(self, step: Step, now: float, reason: str) -> Report:
         """No valid reply to ``step`` before its deadline."""
         report = Report()
+        self._in_flight = None
         slot = step.slot
         if step.kind is StepKind.COMMAND and step.pending is not None:
             pending = step.pending
@@ -370,20 +412,20 @@ class Planner:
                 report.transitions.append(Transition(slot.plan, online=False))
         return report
 
-    def _heard(self, slot: DriveSlot, reply: Reply, report: Report) -> None:
+    def _heard(self, slot: DriveSlot, reply: Reply, report: Report) -> bool:
+        """Take in what ``reply`` says about its drive; whether it shows a new trip."""
         slot.failures = 0
         if slot.online is not True:
             slot.online = True
             report.transitions.append(Transition(slot.plan, online=True))
         status = reply.status
         if status is None:
-            return
+            return False
         if slot.plan.control and slot.intent is None:
             slot.intent = _adopted(slot.plan, reply)
         alarms_changed = status.fault != slot.fault
         warnings_changed = status.warning != slot.warning
-        if status.fault and not slot.fault and slot.intent is not None:
-            slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP)
+        tripped = status.fault and not slot.fault
         slot.fault, slot.warning = status.fault, status.warning
         if alarms_changed or warnings_changed:
             for key in self.codec.condition_parameters(
@@ -391,17 +433,20 @@ class Planner:
             ):
                 if key not in slot.urgent_reads:
                     slot.urgent_reads.append(key)
+        return tripped
 
     def _advance(self, pending: Pending, report: Report, reply: Reply | None) -> None:
         command = pending.command
         if reply is not None and reply.error is not None:
             self._finish(
-                pending, report,
+                pending,
+                report,
                 CommandResult(
-                    outcome=Outcome.REFUSED, error=reply.error,
+                    outcome=Outcome.REFUSED,
+                    error=reply.error,
                     reason=f"the drive refused: {reply.error.text} (error {reply.error.code})",
                 ),
-            )  # fmt: skip
+            )
             return
         if command.action.is_control:
             if pending.intent is None:
@@ -417,10 +462,14 @@ class Planner:
                 target.intent = _without_reset(pending.intent)
             if reply is not None and reply.status and not reply.status.accepts_bus_control:
                 self._finish(
-                    pending, report,
-                    _result(Outcome.REFUSED, "the drive is in local operation and ignores "
-                            "bus commands (status word: no bus control)"),
-                )  # fmt: skip
+                    pending,
+                    report,
+                    _result(
+                        Outcome.REFUSED,
+                        "the drive is in local operation and ignores "
+                        "bus commands (status word: no bus control)",
+                    ),
+                )
                 return
             self._finish(pending, report, _result(Outcome.DONE, ""))
             return

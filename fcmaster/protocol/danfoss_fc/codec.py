@@ -62,6 +62,7 @@ from fcmaster.protocol.drive import ControlIntent
 
 _FAULT_BITS: Final = StatusWord.TRIP | StatusWord.TRIP_LOCK | StatusWord.ERROR
 _TEXT_REPLY_LENGTH: Final = LGE_TEXT_BASE + DEFAULT_MAX_TEXT_LENGTH + 2
+_INFINITY: Final = float("inf")
 
 # parameter → (kind, decoder) for the words that carry alarms and warnings (§9)
 _CONDITION_WORDS: Final = {
@@ -179,6 +180,8 @@ class FcCodec:
         _check_index(spec, index)
         if spec.is_text or isinstance(value, str):
             raise UsageError(f"{parameter.name}: only numeric values can be written")
+        if not -_INFINITY < value < _INFINITY:  # NaN too; round() would raise ValueError
+            raise UsageError(f"{parameter.name}: {value} is not a number that can be written")
         raw = spec.to_raw(value)
         pwe = spec.pwe_from_raw(raw)
         ak = spec.write_ak(raw, eeprom=persist)

@@ -1,0 +1,844 @@
+"""The planner, synchronously: what goes on the wire next, and how each command ends.
+
+Plain tests of each rule, then a hypothesis state machine that drives a planner the way
+the master does (a step goes out, commands arrive while it is in flight, the reply or the
+timeout comes back) and checks the invariants after every move.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from typing import Any
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.stateful import (
+    RuleBasedStateMachine,
+    invariant,
+    precondition,
+    rule,
+)
+
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.bus.planner import Completion, Planner, Report, Step, StepKind
+from fcmaster.protocol.codec import DriveError, DriveStatus, ParameterValue, Reply
+from fcmaster.protocol.danfoss_fc import ControlWord, Telegram, decode_telegram, encode_reference
+from fcmaster.protocol.danfoss_fc.codec import ALARM_WORD, WARNING_WORD, FcCodec
+
+A = DrivePlan(name="a", address=1, control=True)
+B = DrivePlan(name="b", address=2, control=True)
+M = DrivePlan(name="m", address=3)
+STOP_WORD, RUN_WORD = 0x043C, 0x047C
+
+
+def planner(*drives: DrivePlan, **options: Any) -> Planner:
+    plan = LinePlan(name="line1", port="test", drives=drives)
+    return Planner(dataclasses.replace(plan, **options), FcCodec())
+
+
+def reply(
+    address: int,
+    *,
+    running: bool = False,
+    output_pct: float = 0.0,
+    fault: bool = False,
+    warning: bool = False,
+    local: bool = False,
+    value: ParameterValue | None = None,
+    error: DriveError | None = None,
+) -> Reply:
+    word = 0x0207 | 0x0800 * running | 0x0008 * fault | 0x0080 * warning
+    status = DriveStatus(
+        word=word & ~0x0200 if local else word,
+        running=running,
+        fault=fault,
+        warning=warning,
+        at_reference=running,
+        reverse=None if output_pct == 0 else output_pct < 0,
+        accepts_bus_control=not local,
+    )
+    return Reply(address=address, status=status, output_pct=output_pct, value=value, error=error)
+
+
+def telegram(step: Step) -> Telegram:
+    return decode_telegram(step.exchange.request, from_drive=False)
+
+
+def take(p: Planner, now: float = 0.0) -> Step:
+    step = p.next_step(now)
+    assert step is not None
+    return step
+
+
+def answer(p: Planner, now: float = 0.0, **state: Any) -> tuple[Step, Report]:
+    """Take the next step and answer it as its drive (``state``: see :func:`reply`)."""
+    step = take(p, now)
+    assert step.slot is not None
+    return step, p.on_reply(step, reply(step.slot.address, **state), now)
+
+
+def results(*reports: Report | list[Completion]) -> list[Outcome]:
+    ends: list[Outcome] = []
+    for report in reports:
+        completions = report.completions if isinstance(report, Report) else report
+        ends += [c.result.outcome for c in completions]
+    return ends
+
+
+def start(pct: float | None = None) -> Command:
+    return Command(action=Action.START, reference_pct=pct)
+
+
+def set_reference(pct: float) -> Command:
+    return Command(action=Action.SET_REFERENCE, reference_pct=pct)
+
+
+STOP = Command(action=Action.STOP)
+
+
+def adopted(p: Planner, name: str = "a", **state: Any) -> None:
+    """Poll until drive ``name`` has answered once (and so is adopted)."""
+    while True:
+        step, _ = answer(p, **state)
+        if step.slot is not None and step.slot.name == name:
+            return
+
+
+# -- the order of service ----------------------------------------------------------------
+
+
+def test_idle_polls_rotate_over_the_drives_in_configured_order() -> None:
+    p = planner(A, B, M)
+    steps = [answer(p)[0] for _ in range(7)]
+    assert [s.kind for s in steps] == [StepKind.POLL] * 7
+    assert [s.exchange.address for s in steps] == [1, 2, 3, 1, 2, 3, 1]
+
+
+def test_urgent_command_goes_before_earlier_commands_and_polls() -> None:
+    p = planner(A, M)
+    adopted(p)
+    read = Command(action=Action.READ, parameter="16-13")
+    assert p.submit("m", read, "read") == []
+    assert p.submit("a", Command(action=Action.READ, parameter="16-14"), "read-a") == []
+    assert p.submit("a", Command(action=Action.QUICK_STOP), "quick") == []
+    steps = []
+    for _ in range(3):
+        step = take(p)
+        assert step.pending is not None
+        steps.append(step.pending.tickets)
+        p.on_reply(step, reply(step.exchange.address), 0.0)
+    assert steps == [["quick"], ["read"], ["read-a"]]
+    assert take(p).kind is StepKind.POLL
+
+
+def test_commands_are_served_in_arrival_order() -> None:
+    p = planner(A, M)
+    for n, parameter in enumerate(("16-13", "16-14", "16-30")):
+        p.submit("m", Command(action=Action.READ, parameter=parameter), n)
+    order = []
+    while p.has_commands:
+        step = take(p)
+        order.append(telegram(step).pnu)
+        p.on_reply(step, reply(3), 0.0)
+    assert order == [1613, 1614, 1630]
+
+
+def test_failed_command_is_retried_first_and_times_out_after_its_retries() -> None:
+    p = planner(A, M, retries=2)
+    p.submit("m", Command(action=Action.READ, parameter="16-13"), "read")
+    attempts = []
+    for n in range(3):
+        step = take(p, float(n))
+        assert step.pending is not None
+        assert step.pending.tickets == ["read"]
+        attempts.append(p.on_failure(step, float(n), "no reply"))
+    assert results(*attempts) == [Outcome.TIMEOUT]
+    assert attempts[-1].completions[0].result.reason == "no reply"
+    assert take(p).kind is StepKind.POLL
+
+
+def test_stop_submitted_between_retries_goes_first() -> None:
+    p = planner(A, M)
+    adopted(p)
+    p.submit("m", Command(action=Action.READ, parameter="16-13"), "read")
+    p.on_failure(take(p), 0.0, "no reply")
+    p.submit("a", STOP, "stop")
+    step = take(p)
+    assert step.pending is not None
+    assert step.pending.tickets == ["stop"]
+
+
+def test_failed_idle_poll_is_not_retried() -> None:
+    p = planner(A, M)
+    step = take(p)
+    p.on_failure(step, 0.0, "no reply")
+    assert take(p).exchange.address == 3
+
+
+def test_nothing_to_do_when_every_drive_is_demoted_until_the_next_probe() -> None:
+    p = planner(A, M, offline_after=1, probe_interval_s=2.0)
+    for _ in range(2):
+        p.on_failure(take(p, 10.0), 10.0, "no reply")
+    assert p.next_step(11.0) is None
+    assert p.next_wakeup(11.0) == 12.0
+    probe = take(p, 12.0)
+    assert probe.kind is StepKind.PROBE
+    assert p.next_wakeup(12.0) == 12.0  # the other drive's probe is due too
+
+
+def test_next_wakeup_is_none_while_no_drive_is_demoted() -> None:
+    assert planner(A, M).next_wakeup(0.0) is None
+
+
+# -- demotion, probes, recovery ----------------------------------------------------------
+
+
+def test_drive_is_demoted_after_offline_after_consecutive_failures() -> None:
+    p = planner(M, offline_after=3, probe_interval_s=5.0)
+    reports = [p.on_failure(take(p, t), t, "no reply") for t in (0.0, 1.0, 2.0)]
+    assert [r.transitions for r in reports[:2]] == [[], []]
+    ((transition,),) = [r.transitions for r in reports[2:]]
+    assert (transition.drive, transition.online) == (M, False)
+    assert p.next_step(6.9) is None
+    probe = take(p, 7.0)
+    assert (probe.kind, len(probe.exchange.request)) == (StepKind.PROBE, 8)
+    assert (telegram(probe).pcd1, telegram(probe).pcd2) == (0, 0)
+
+
+def test_a_reply_in_between_resets_the_failure_count() -> None:
+    p = planner(M, offline_after=2)
+    p.on_failure(take(p), 0.0, "no reply")
+    p.on_reply(take(p), reply(3), 0.0)
+    report = p.on_failure(take(p), 0.0, "no reply")
+    assert report.transitions == []
+
+
+def test_demoted_drive_is_probed_at_the_probe_interval_while_others_are_polled() -> None:
+    p = planner(A, M, offline_after=1, probe_interval_s=1.0)
+    probes, now = [], 0.0
+    while now < 5.0:
+        step = take(p, now)
+        if step.exchange.address == 3:
+            if step.kind is StepKind.PROBE:
+                probes.append(now)
+            p.on_failure(step, now, "no reply")
+        else:
+            p.on_reply(step, reply(1), now)
+        now += 0.03
+    assert len(probes) == 4
+    assert all(1.0 <= b - a < 1.03 + 1e-9 for a, b in itertools.pairwise(probes))
+
+
+def test_answered_probe_brings_the_drive_back_into_the_round() -> None:
+    p = planner(A, M, offline_after=1, probe_interval_s=1.0)
+    answer(p)
+    p.on_failure(take(p), 0.0, "no reply")
+    probe = take(p, 1.0)
+    report = p.on_reply(probe, reply(3), 1.0)
+    assert [(t.drive.name, t.online) for t in report.transitions] == [("m", True)]
+    assert {take(p, 1.0).exchange.address for _ in range(2)} == {1, 3}
+
+
+def test_running_drive_is_probed_without_a_command_and_adopted_again() -> None:
+    p = planner(A, offline_after=1, probe_interval_s=1.0)
+    answer(p, running=True, output_pct=50.0)
+    assert telegram(take(p)).pcd1 == RUN_WORD
+    p.on_failure(take(p), 0.0, "no reply")
+    probe = take(p, 1.0)
+    assert telegram(probe).pcd1 == 0
+    p.on_reply(probe, reply(1), 1.0)  # it stopped meanwhile
+    assert telegram(take(p, 1.0)).pcd1 == STOP_WORD
+
+
+def test_stopped_drive_keeps_its_stop_word_through_demotion() -> None:
+    p = planner(A, offline_after=1, probe_interval_s=1.0)
+    answer(p, running=True, output_pct=50.0)
+    p.submit("a", STOP, "stop")
+    answer(p)
+    p.on_failure(take(p), 0.0, "no reply")
+    assert telegram(take(p, 1.0)).pcd1 == STOP_WORD
+
+
+# -- control intent: adoption, commands, trips, resets ------------------------------------
+
+
+def test_monitor_only_drive_is_never_commanded() -> None:
+    p = planner(M)
+    for _ in range(3):
+        step, _ = answer(p, running=True, output_pct=50.0)
+        assert (telegram(step).pcd1, telegram(step).pcd2) == (0, 0)
+        assert not step.exchange.carries_control
+
+
+@pytest.mark.parametrize(
+    ("state", "word", "reference"),
+    [
+        pytest.param({"running": True, "output_pct": 37.5}, RUN_WORD, 37.5, id="running"),
+        pytest.param({"running": True, "output_pct": -25.0}, RUN_WORD | 0x8000, 25.0, id="reverse"),
+        pytest.param({"running": False}, STOP_WORD, 0.0, id="stopped"),
+        pytest.param({"running": True, "fault": True}, STOP_WORD, 0.0, id="tripped"),
+    ],
+)
+def test_first_reply_is_adopted(state: dict[str, Any], word: int, reference: float) -> None:
+    p = planner(A)
+    first, _ = answer(p, **state)
+    assert (telegram(first).pcd1, first.exchange.carries_control) == (0, False)
+    second = telegram(take(p))
+    assert (second.pcd1, second.pcd2) == (word, encode_reference(reference))
+
+
+def test_on_start_stop_commands_a_stop_before_anything_is_known() -> None:
+    p = planner(dataclasses.replace(A, on_start=OnStart.STOP))
+    first = take(p)
+    assert (telegram(first).pcd1, first.exchange.carries_control) == (STOP_WORD, True)
+
+
+def test_start_then_set_reference_keeps_running_at_the_new_reference() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(20.0), 1)
+    step, report = answer(p, running=True, output_pct=20.0)
+    assert (telegram(step).pcd1, telegram(step).pcd2) == (RUN_WORD, encode_reference(20.0))
+    assert results(report) == [Outcome.DONE]
+    p.submit("a", set_reference(30.0), 2)
+    step, _ = answer(p, running=True, output_pct=30.0)
+    assert (telegram(step).pcd1, telegram(step).pcd2) == (RUN_WORD, encode_reference(30.0))
+    assert telegram(take(p)).pcd2 == encode_reference(30.0)
+
+
+def test_reverse_and_forward_change_only_the_direction() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=40.0)
+    p.submit("a", Command(action=Action.REVERSE), 1)
+    step, _ = answer(p)
+    assert telegram(step).pcd1 == RUN_WORD | ControlWord.REVERSE
+    p.submit("a", Command(action=Action.FORWARD), 2)
+    step, _ = answer(p)
+    assert (telegram(step).pcd1, telegram(step).pcd2) == (RUN_WORD, encode_reference(40.0))
+
+
+def test_relative_command_to_a_drive_not_yet_heard_first_learns_its_state() -> None:
+    p = planner(A)
+    p.submit("a", set_reference(30.0), "ref")
+    learn = take(p)
+    assert learn.kind is StepKind.COMMAND
+    assert (telegram(learn).pcd1, telegram(learn).pke) == (0, None)
+    assert p.on_reply(learn, reply(1, running=True, output_pct=45.0), 0.0).completions == []
+    step, report = answer(p)
+    assert (telegram(step).pcd1, telegram(step).pcd2) == (RUN_WORD, encode_reference(30.0))
+    assert results(report) == [Outcome.DONE]
+
+
+def test_trip_turns_the_intent_into_a_stop_and_reset_does_not_restart() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=50.0)
+    answer(p, fault=True)
+    assert telegram(take(p)).pcd1 == STOP_WORD
+    p.submit("a", Command(action=Action.RESET), "reset")
+    pulse, report = answer(p, fault=True)
+    assert telegram(pulse).pcd1 == STOP_WORD | ControlWord.RESET
+    assert results(report) == [Outcome.DONE]
+    assert telegram(take(p)).pcd1 == STOP_WORD  # the pulse lasts one telegram
+
+
+def test_trip_seen_in_the_reply_to_a_motion_command_still_stops() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=50.0)
+    p.submit("a", set_reference(60.0), "ref")
+    answer(p, fault=True)  # the drive tripped just before the command reached it
+    assert telegram(take(p)).pcd1 == STOP_WORD
+
+
+def test_start_after_a_trip_is_needed_and_honoured() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=50.0)
+    answer(p, fault=True)
+    p.submit("a", start(), "start")
+    answer(p)
+    assert telegram(take(p)).pcd1 == RUN_WORD
+
+
+@pytest.mark.parametrize(
+    ("state", "parameter"),
+    [
+        pytest.param({"fault": True}, ALARM_WORD, id="alarm"),
+        pytest.param({"warning": True}, WARNING_WORD, id="warning"),
+    ],
+)
+def test_changed_alarm_or_warning_bit_reads_its_word_with_the_next_poll(
+    state: dict[str, Any], parameter: Any
+) -> None:
+    p = planner(dataclasses.replace(M, monitor=("16-13",)))
+    answer(p)
+    answer(p, **state)
+    assert telegram(take(p)).pnu == parameter.code
+    assert telegram(take(p)).pnu == 1613
+
+
+def test_drive_in_local_operation_refuses_a_command() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(10.0), "start")
+    _, report = answer(p, local=True)
+    ((completion,),) = [report.completions]
+    assert completion.result.outcome is Outcome.REFUSED
+    assert "local operation" in completion.result.reason
+
+
+def test_parameter_read_ends_done_with_the_value_and_ak_7_ends_refused() -> None:
+    p = planner(M)
+    p.submit("m", Command(action=Action.READ, parameter="16-13"), "ok")
+    p.submit("m", Command(action=Action.READ, parameter="15-00"), "no")
+    value = ParameterValue(
+        parameter=FcCodec().parameter("16-13"), index=0, raw=503, value=50.3, unit="Hz"
+    )
+    _, done = answer(p, value=value)
+    _, refused = answer(p, error=DriveError(130, "No bus access for this parameter"))
+    assert done.completions[0].result == CommandResult(outcome=Outcome.DONE, value=value)
+    result = refused.completions[0].result
+    assert result.outcome is Outcome.REFUSED
+    assert result.error == DriveError(130, "No bus access for this parameter")
+    assert "error 130" in result.reason
+
+
+def test_broadcast_is_sent_to_address_0_and_done_once_sent() -> None:
+    p = planner(A, B)
+    adopted(p, "b", running=True, output_pct=20.0)
+    p.submit(None, STOP, "all")
+    step = take(p)
+    assert (step.exchange.address, step.exchange.expects_reply) == (0, False)
+    assert telegram(step).pcd1 == STOP_WORD
+    assert results(p.on_sent(step, 0.0)) == [Outcome.DONE]
+    assert {telegram(take(p)).pcd1 for _ in range(2)} == {STOP_WORD}
+
+
+# -- refusals ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("name", "command", "outcome", "reason"),
+    [
+        pytest.param("x", STOP, Outcome.INVALID, "no drive called 'x'", id="unknown-drive"),
+        pytest.param(
+            None, Command(action=Action.READ, parameter="16-13"), Outcome.INVALID,
+            "only control actions", id="broadcast-read",
+        ),
+        pytest.param("m", STOP, Outcome.NOT_ALLOWED, "m is monitor-only", id="monitor-only"),
+        pytest.param(None, STOP, Outcome.NOT_ALLOWED, "m is monitor-only", id="broadcast"),
+        pytest.param(
+            "a", start(101.0), Outcome.NOT_ALLOWED, "limit of 50 Hz", id="above-max",
+        ),
+        pytest.param(
+            "a", set_reference(-101.0), Outcome.NOT_ALLOWED, "limit of 50 Hz", id="below-neg-max",
+        ),
+        pytest.param("b", start(10.0), Outcome.NOT_ALLOWED, "minimum of 10 Hz", id="below-min"),
+        pytest.param(
+            "a", Command(action=Action.READ, parameter="speed"), Outcome.INVALID,
+            "not written like 16-13", id="bad-parameter",
+        ),
+        pytest.param(
+            "a", Command(action=Action.WRITE, parameter="3-41"), Outcome.INVALID,
+            "needs a value", id="write-without-value",
+        ),
+        pytest.param(
+            "a", Command(action=Action.WRITE, parameter="3-41", value=math.nan), Outcome.INVALID,
+            "", id="write-nan",
+        ),
+        pytest.param("a", start(math.nan), Outcome.INVALID, "", id="nan-reference"),
+        pytest.param("c", start(240.0), Outcome.INVALID, "reference", id="not-encodable"),
+    ],
+)  # fmt: skip
+def test_command_that_cannot_go_on_the_wire_ends_at_once(
+    name: str | None, command: Command, outcome: Outcome, reason: str
+) -> None:
+    p = planner(
+        A,
+        dataclasses.replace(B, min_frequency_hz=10.0),
+        DrivePlan(name="c", address=4, control=True, max_frequency_hz=150.0),
+        M,
+    )
+    ((completion,),) = [p.submit(name, command, "t")]
+    assert completion.tickets == ("t",)
+    assert completion.result.outcome is outcome
+    assert reason in completion.result.reason
+    assert not p.has_commands
+
+
+# -- superseding, coalescing, and commands already on the wire -----------------------------
+
+
+def test_stop_supersedes_queued_motion_commands_of_that_drive_only() -> None:
+    p = planner(A, B)
+    adopted(p)
+    p.submit("a", start(10.0), "start")
+    p.submit("a", Command(action=Action.JOG), "jog")
+    p.submit("a", set_reference(20.0), "ref")
+    p.submit("a", Command(action=Action.READ, parameter="16-13"), "read")
+    p.submit("b", start(10.0), "other")
+    ended = p.submit("a", STOP, "stop")
+    assert [(c.tickets, c.result.outcome, c.result.reason) for c in ended] == [
+        (("start",), Outcome.CANCELLED, "superseded by stop"),
+        (("jog",), Outcome.CANCELLED, "superseded by stop"),
+        (("ref",), Outcome.CANCELLED, "superseded by stop"),
+    ]
+    left = []
+    while p.has_commands:
+        step, _ = answer(p)
+        assert step.pending is not None
+        left += step.pending.tickets
+    assert left == ["stop", "read", "other"]
+
+
+def test_stop_does_not_cancel_a_start_already_on_the_wire() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    in_flight = take(p)
+    assert p.submit("a", STOP, "stop") == []
+    assert results(p.on_reply(in_flight, reply(1, running=True, output_pct=50.0), 0.0)) == [
+        Outcome.DONE
+    ]
+    step, report = answer(p, running=True, output_pct=50.0)
+    assert telegram(step).pcd1 == STOP_WORD
+    assert results(report) == [Outcome.DONE]
+
+
+def test_stop_does_not_cancel_a_start_whose_first_attempt_failed() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    p.on_failure(take(p), 0.0, "no reply")
+    assert p.submit("a", STOP, "stop") == []
+
+
+def test_queued_references_coalesce_and_the_newest_wins() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=10.0)
+    for pct in (20.0, 30.0, 40.0):
+        assert p.submit("a", set_reference(pct), pct) == []
+    step, report = answer(p)
+    assert telegram(step).pcd2 == encode_reference(40.0)
+    ((completion,),) = [report.completions]
+    assert completion.tickets == (20.0, 30.0, 40.0)
+    assert not p.has_commands
+
+
+def test_reference_does_not_coalesce_into_one_already_on_the_wire() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=10.0)
+    p.submit("a", set_reference(20.0), "first")
+    in_flight = take(p)
+    p.submit("a", set_reference(30.0), "second")
+    assert results(p.on_reply(in_flight, reply(1), 0.0)) == [Outcome.DONE]
+    step, report = answer(p)
+    assert telegram(step).pcd2 == encode_reference(30.0)
+    assert [c.tickets for c in report.completions] == [("second",)]
+
+
+def test_reference_does_not_coalesce_past_a_later_start_with_a_reference() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", set_reference(10.0), "ref-10")
+    p.submit("a", start(30.0), "start-30")
+    p.submit("a", set_reference(20.0), "ref-20")
+    while p.has_commands:
+        answer(p)
+    assert telegram(take(p)).pcd2 == encode_reference(20.0)  # the newest wins
+
+
+def test_references_of_different_drives_do_not_coalesce() -> None:
+    p = planner(A, B)
+    p.submit("a", set_reference(10.0), "a")
+    p.submit("b", set_reference(20.0), "b")
+    ended: list[Outcome] = []
+    while p.has_commands:
+        ended += results(answer(p)[1])
+    assert ended == [Outcome.DONE, Outcome.DONE]
+
+
+def test_cancel_all_ends_every_queued_command_once() -> None:
+    p = planner(A, M)
+    adopted(p)
+    p.submit("a", STOP, 1)
+    p.submit("a", start(10.0), 2)
+    p.submit("m", Command(action=Action.READ, parameter="16-13"), 3)
+    ended = p.cancel_all("line1 shut down")
+    tickets = [t for c in ended for t in c.tickets]
+    assert len(tickets) == 3
+    assert set(tickets) == {1, 2, 3}
+    assert {c.result.reason for c in ended} == {"line1 shut down"}
+    assert p.cancel_all("again") == []
+    assert not p.has_commands
+
+
+# -- invariants under random sequences ---------------------------------------------------
+
+DRIVES = (A, DrivePlan(name="b", address=2, control=True, on_start=OnStart.STOP), M)
+ANY_NAME = st.sampled_from([None, "a", "b", "m", "nobody"])
+NAME = st.sampled_from(["a", "b", "m"])
+PERCENT = st.one_of(st.none(), st.floats(-100.0, 100.0), st.floats(-120.0, 120.0))
+MOTION = st.sampled_from(
+    [Action.START, Action.JOG, Action.SET_REFERENCE, Action.FORWARD, Action.REVERSE]
+)
+URGENT = st.sampled_from([Action.STOP, Action.COAST, Action.QUICK_STOP])
+PROBE_INTERVAL_S = 1.0
+
+
+def commands() -> st.SearchStrategy[Command]:
+    control = st.builds(
+        Command,
+        action=st.sampled_from([a for a in Action if a.is_control]),
+        reference_pct=PERCENT,
+    )
+    read = st.builds(
+        Command, action=st.just(Action.READ), parameter=st.sampled_from(["16-13", "15-40"])
+    )
+    write = st.builds(
+        Command,
+        action=st.just(Action.WRITE),
+        parameter=st.just("3-41"),
+        value=st.one_of(st.none(), st.floats(0.0, 100.0)),
+    )
+    return st.one_of(control, read, write)
+
+
+class PlannerMachine(RuleBasedStateMachine):
+    """Drives a planner as the master does; commands may arrive while a step is in flight."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        plan = LinePlan(
+            name="line1",
+            port="test",
+            retries=1,
+            offline_after=2,
+            probe_interval_s=PROBE_INTERVAL_S,
+            drives=DRIVES,
+        )
+        self.planner = Planner(plan, FcCodec())
+        self.now = 0.0
+        self.in_flight: Step | None = None
+        self.tickets: list[int] = []
+        self.ends: dict[int, list[CommandResult]] = {}
+        self.urgent: set[int] = set()  # urgent commands submitted and not ended
+        self.last_probe: dict[str, float] = {}
+        self.demoted_at: dict[str, float] = {}
+        self.polls_since: dict[str, int] = {}
+
+    def _ended(self, completions: list[Completion]) -> None:
+        for completion in completions:
+            for ticket in completion.tickets:
+                assert isinstance(ticket, int)
+                self.ends.setdefault(ticket, []).append(completion.result)
+                self.urgent.discard(ticket)
+
+    def _report(self, report: Report) -> None:
+        self._ended(report.completions)
+        for transition in report.transitions:
+            name = transition.drive.name
+            if transition.online:
+                self.demoted_at.pop(name, None)
+                self.polls_since[name] = 0
+            else:
+                self.demoted_at[name] = self.now
+                self.polls_since.pop(name, None)
+
+    def _submit(self, name: str | None, command: Command) -> None:
+        ticket = len(self.tickets)
+        self.tickets.append(ticket)
+        if command.action.is_urgent:
+            self.urgent.add(ticket)
+        self._ended(self.planner.submit(name, command, ticket))
+
+    @rule(name=NAME, action=MOTION, reference_pct=PERCENT)
+    def submit_motion(self, name: str, action: Action, reference_pct: float | None) -> None:
+        if action is Action.SET_REFERENCE and reference_pct is None:
+            reference_pct = 50.0
+        self._submit(name, Command(action=action, reference_pct=reference_pct))
+
+    @rule(name=st.one_of(NAME, st.none()), action=URGENT)
+    def submit_urgent(self, name: str | None, action: Action) -> None:
+        self._submit(name, Command(action=action))
+
+    @rule(name=ANY_NAME, command=commands())
+    def submit_any(self, name: str | None, command: Command) -> None:
+        self._submit(name, command)
+
+    def _drive_in_flight(self) -> str | None:
+        """The drive whose command is on the wire, if a command is."""
+        step = self.in_flight
+        if step is None or step.pending is None or step.slot is None:
+            return None
+        return step.slot.name
+
+    # The race the master lives with: a caller acts on the drive its command is talking to.
+    @precondition(lambda self: self._drive_in_flight() is not None)
+    @rule(action=URGENT)
+    def stop_the_drive_in_flight(self, action: Action) -> None:
+        self._submit(self._drive_in_flight(), Command(action=action))
+
+    @precondition(lambda self: self._drive_in_flight() is not None)
+    @rule(reference_pct=st.floats(-100.0, 100.0))
+    def refer_the_drive_in_flight(self, reference_pct: float) -> None:
+        command = Command(action=Action.SET_REFERENCE, reference_pct=reference_pct)
+        self._submit(self._drive_in_flight(), command)
+
+    @precondition(lambda self: self.in_flight is None)
+    @rule(elapsed=st.floats(0.0, 0.4))
+    def send(self, elapsed: float) -> None:
+        self.now += elapsed
+        step = self.planner.next_step(self.now)
+        if self.urgent:
+            assert step is not None
+            assert step.kind is StepKind.COMMAND
+            assert step.pending is not None
+            assert step.pending.command.action.is_urgent
+        if step is None:
+            assert not self.planner.has_commands
+            wakeup = self.planner.next_wakeup(self.now)
+            assert all(slot.online is False for slot in self.planner.slots)
+            assert wakeup is not None
+            assert wakeup > self.now
+            return
+        if step.kind is StepKind.PROBE:
+            assert step.slot is not None
+            name = step.slot.name
+            assert self.now >= self.demoted_at[name] + PROBE_INTERVAL_S - 1e-9
+            assert self.now >= self.last_probe.get(name, -math.inf) + PROBE_INTERVAL_S - 1e-9
+            self.last_probe[name] = self.now
+        if step.kind is StepKind.POLL:
+            assert step.slot is not None
+            assert step.slot.online is not False
+            for name in self.polls_since:
+                self.polls_since[name] += 1
+            self.polls_since[step.slot.name] = 0
+            assert max(self.polls_since.values()) < len(DRIVES)
+        if not step.exchange.expects_reply:
+            self._report(self.planner.on_sent(step, self.now))
+            return
+        self.in_flight = step
+
+    @precondition(lambda self: self.in_flight is None)
+    @rule(elapsed=st.floats(0.0, 1.5))
+    def wait(self, elapsed: float) -> None:
+        self.now += elapsed
+
+    @precondition(lambda self: self.in_flight is not None)
+    @rule(
+        running=st.booleans(),
+        fault=st.booleans(),
+        warning=st.booleans(),
+        local=st.booleans(),
+        output_pct=st.sampled_from([0.0, 25.0, -50.0]),
+        refused=st.booleans(),
+    )
+    def reply(
+        self,
+        running: bool,
+        fault: bool,
+        warning: bool,
+        local: bool,
+        output_pct: float,
+        refused: bool,
+    ) -> None:
+        step, self.in_flight = self.in_flight, None
+        assert step is not None
+        error = (
+            DriveError(0, "Illegal parameter number")
+            if refused and step.exchange.parameter
+            else None
+        )
+        answer = reply(
+            step.exchange.address,
+            running=running,
+            output_pct=output_pct if running else 0.0,
+            fault=fault,
+            warning=warning,
+            local=local,
+            error=error,
+        )
+        self._report(self.planner.on_reply(step, answer, self.now))
+
+    @precondition(lambda self: self.in_flight is not None)
+    @rule(elapsed=st.floats(0.0, 0.1))
+    def time_out(self, elapsed: float) -> None:
+        step, self.in_flight = self.in_flight, None
+        assert step is not None
+        self.now += elapsed
+        self._report(self.planner.on_failure(step, self.now, "no reply"))
+
+    @precondition(lambda self: len(self.tickets) % 8 == 7)  # now and then: it empties the queues
+    @rule()
+    def line_lost(self) -> None:
+        self.in_flight = None  # the step in flight is abandoned with the port
+        self._ended(self.planner.cancel_all("line1 lost its port"))
+
+    @invariant()
+    def no_command_ends_twice(self) -> None:
+        assert all(len(results) == 1 for results in self.ends.values())
+
+    def teardown(self) -> None:
+        self._ended(self.planner.cancel_all("line1 shut down"))
+        assert sorted(self.ends) == self.tickets
+        assert all(len(results) == 1 for results in self.ends.values())
+
+
+@given(
+    events=st.lists(
+        st.tuples(st.floats(0.0, 0.6), st.sampled_from([True, True, False])), max_size=300
+    )
+)
+@settings(max_examples=150, deadline=None)
+def test_polls_reach_every_drive_and_probes_keep_their_interval(
+    events: list[tuple[float, bool]],
+) -> None:
+    """Random replies and timeouts, no commands: polls stay fair, probes stay slow."""
+    p = planner(A, B, M, offline_after=2, probe_interval_s=PROBE_INTERVAL_S)
+    now, demoted_at, last_probe = 0.0, dict[str, float](), dict[str, float]()
+    polls_since = {name: 0 for name in ("a", "b", "m")}
+    for elapsed, answered in events:
+        now += elapsed
+        step = p.next_step(now)
+        if step is None:
+            assert all(slot.online is False for slot in p.slots)
+            wakeup = p.next_wakeup(now)
+            assert wakeup is not None
+            assert wakeup > now
+            now = wakeup
+            continue
+        assert step.slot is not None
+        name = step.slot.name
+        if step.kind is StepKind.PROBE:
+            assert now >= demoted_at[name] + PROBE_INTERVAL_S
+            assert now >= last_probe.get(name, -math.inf) + PROBE_INTERVAL_S
+            last_probe[name] = now
+        else:
+            assert step.kind is StepKind.POLL
+            for other in polls_since:
+                polls_since[other] += 1
+            polls_since[name] = 0
+            assert max(polls_since.values()) < len(p.slots)  # each polled once a round
+        if answered:
+            report = p.on_reply(step, reply(step.slot.address), now)
+        else:
+            report = p.on_failure(step, now, "no reply")
+        for transition in report.transitions:
+            who = transition.drive.name
+            if transition.online:
+                polls_since[who] = 0
+            else:
+                demoted_at[who] = now
+                polls_since.pop(who, None)
+
+
+PlannerMachine.TestCase.settings = settings(
+    max_examples=150,
+    stateful_step_count=40,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+test_planner_invariants_hold_under_random_sequences = PlannerMachine.TestCase
