@@ -45,15 +45,15 @@ class Link:
         self._recorder: deque[tuple[str, bytes]] = deque(maxlen=32)  # flight recorder
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
         self.written_at = 0.0  # when the last request was written
+        self.ready_at = 0.0  # when the next request may go (pause, drain or broadcast wait)
         self._framer = codec.new_framer()
-        self._ready_at = 0.0
         self._replied_at: float | None = None
 
     async def send(self, exchange: Exchange) -> None:
         """Wait for the line to be free, drop stale input, and write the request."""
         clock, stats = self.clock, self.stats
-        if self._ready_at > clock.now():
-            await clock.sleep_until(self._ready_at)
+        if self.ready_at > clock.now():
+            await clock.sleep_until(self.ready_at)
         stale = self.transport.discard_input()
         if stale:
             stats.late_bytes += len(stale)
@@ -68,13 +68,13 @@ class Link:
         if not exchange.expects_reply:
             # Broadcasts and resets get no answer: give the drives time to act on them.
             stats.broadcasts += 1
-            self._ready_at = (
+            self.ready_at = (
                 written_at
                 + self.plan.wire_s(len(exchange.request))
                 + self.plan.response_delay_s
                 + self.pause_s
             )
-            stats.busy_s += self._ready_at - written_at
+            stats.busy_s += self.ready_at - written_at
 
     async def receive(self, exchange: Exchange) -> Reply | None:
         """The reply to the request just sent, or None when none came before the deadline."""
@@ -87,13 +87,13 @@ class Link:
             stats.timeouts += 1
             self._record("timeout", b"")
             # Let a late reply finish arriving, so it is discarded, not misattributed.
-            self._ready_at = now + plan.wire_s(exchange.reply_length) + plan.gap_s
+            self.ready_at = now + plan.wire_s(exchange.reply_length) + plan.gap_s
         else:
             stats.replies += 1
             stats.latency.observe(now - written_at)
             self._replied_at = now
-            self._ready_at = now + self.pause_s
-        stats.busy_s += self._ready_at - written_at
+            self.ready_at = now + self.pause_s
+        stats.busy_s += self.ready_at - written_at
         return reply
 
     async def transact(self, exchange: Exchange) -> Reply | None:

@@ -2,12 +2,11 @@
 
 Theory of operation
 -------------------
-One transaction is in flight at any time. The loop asks the :class:`Planner` for a step,
-waits out the pause the protocol asks after the previous reply, drops stale input, writes
-the request as one burst, and reads until the codec's framer yields a frame that answers
-it or the deadline passes. Frames from another address, malformed frames and noise are
-counted and the read goes on; after a timeout the line is left to drain (a late reply is
-discarded before the next request instead of being taken for it).
+One transaction is in flight at any time. The loop asks the :class:`Planner` for a step
+and carries it over a :class:`~fcmaster.bus.link.Link`, which owns the wire discipline:
+the pause after the previous reply, dropping stale input, one-burst writes, reading until a
+frame answers the request or the deadline passes, and draining after a timeout so a late
+reply is never taken for the next one.
 
 The turnaround between a reply and the next request is the master's whole overhead, so the
 loop does there only what decides the next request: decode, planner update, encode. Drive
@@ -15,7 +14,8 @@ updates for the layers above are handed on right *after* the next request is wri
 it is on the wire. Command results are resolved at once.
 
 The pause is counted from the reply's arrival, so the work inside it is free; the clock's
-sleep must be precise for this to hold (see :mod:`fcmaster.clock`).
+sleep must be precise for this to hold (see :mod:`fcmaster.clock`). A command that arrives
+during the pause still goes first: the poll chosen before it is taken back.
 
 A port that fails (adapter unplugged, server gone) takes the line down: queued commands end
 ``cancelled`` with the reason, and the port is reopened with capped, jittered exponential
@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import asyncio
 import random
-from collections import deque
 from collections.abc import Callable
 from functools import partial
 from typing import Protocol
@@ -34,21 +33,17 @@ from typing import Protocol
 import structlog
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.link import Link
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.planner import Completion, Planner, Report, Step, StepKind
 from fcmaster.bus.stats import DriveStats, LineStats
 from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock
 from fcmaster.errors import (
-    MalformedReply,
     PortError,
-    ProtocolError,
-    ReplyTimeout,
-    UnexpectedReply,
 )
-from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
+from fcmaster.protocol.codec import DriveCodec, Reply
 from fcmaster.protocol.drive import ControlIntent
-from fcmaster.protocol.framing import Frame, SkipReason
 
 log = structlog.get_logger("fcmaster.bus")
 
@@ -114,13 +109,11 @@ class BusMaster:
         self.codec = codec
         self.planner = Planner(plan, codec)
         self.stats = LineStats(drives={d.name: DriveStats() for d in plan.drives})
-        self.recent_frames: deque[tuple[str, str]] = deque(maxlen=32)  # flight recorder
         self._transport = transport
         self._clock = clock
+        self._link = Link(plan, codec=codec, transport=transport, clock=clock, stats=self.stats)
         self._observer: BusObserver = observer or _NullObserver()
         self._rng = rng or random.Random()
-        self._framer = codec.new_framer()
-        self._pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
         self._wake = asyncio.Event()
         self._tried = asyncio.Event()  # the port has been tried once since __aenter__
         self._task: asyncio.Task[None] | None = None
@@ -241,7 +234,7 @@ class BusMaster:
         self._up = False
         self._down_reason = reason
         now = self._clock.now()
-        self._log.warning("bus.lost", error=reason, recent_frames=list(self.recent_frames))
+        self._log.warning("bus.lost", error=reason, recent_frames=self.recent_frames)
         self._resolve(self.planner.cancel_all(f"{self.plan.name} lost its port: {reason}"))
         self.planner.on_line_down()  # when it is back, adopt the drives as at start
         for slot in self.planner.slots:
@@ -251,9 +244,7 @@ class BusMaster:
         self._observer.line_availability(self.plan.name, False, reason, now)
 
     async def _serve(self) -> None:
-        clock, transport, planner, stats = self._clock, self._transport, self.planner, self.stats
-        ready_at = clock.now()
-        replied_at: float | None = None
+        clock, link, planner = self._clock, self._link, self.planner
         while True:
             now = clock.now()
             step = planner.next_step(now)
@@ -261,47 +252,26 @@ class BusMaster:
                 self._flush_deferred()
                 await self._idle(planner.next_wakeup(now))
                 continue
-            if ready_at > now:
-                await clock.sleep_until(ready_at)
-            stale = transport.discard_input()
-            if stale:
-                stats.late_bytes += len(stale)
-                self._log.debug("bus.discarded", frame=stale.hex(" "))
+            if link.ready_at > now:
+                # The next step was chosen (and encoded) inside the pause, where it is free.
+                await clock.sleep_until(link.ready_at)
+                if step.kind is not StepKind.COMMAND and planner.has_commands:
+                    planner.retract(step)  # a command came in meanwhile: it goes first
+                    continue
             exchange = step.exchange
-            written_at = clock.now()
-            if replied_at is not None:
-                stats.turnaround.observe(max(0.0, written_at - replied_at - self._pause_s))
-                replied_at = None
-            await transport.write(exchange.request)
-            self._flush_deferred()
+            await link.send(exchange)
+            self._flush_deferred()  # the layers above get the last reply while this one travels
             self._count_request(step)
             if not exchange.expects_reply:
-                # Broadcasts and resets get no answer: give the drives time to act on it.
-                ready_at = (
-                    written_at
-                    + self.plan.wire_s(len(exchange.request))
-                    + self.plan.response_delay_s
-                    + self._pause_s
-                )
-                stats.busy_s += ready_at - written_at
-                self._handle(planner.on_sent(step, ready_at))
+                self._handle(planner.on_sent(step, clock.now()))
                 continue
-            deadline = written_at + self.plan.reply_timeout(
-                len(exchange.request), exchange.reply_length
-            )
-            reply = await self._receive(exchange, deadline)
+            reply = await link.receive(exchange)
             now = clock.now()
             if reply is None:
                 self._count_failure(step)
                 self._handle(planner.on_failure(step, now, self._timeout_reason(step)))
-                # Let a late reply finish arriving, so it is discarded, not misattributed.
-                ready_at = now + self.plan.wire_s(exchange.reply_length) + self.plan.gap_s
-                stats.busy_s += ready_at - written_at
                 continue
-            replied_at = now
-            ready_at = now + self._pause_s
-            stats.busy_s += ready_at - written_at
-            self._count_reply(step, reply, now - written_at)
+            self._count_reply(step, reply, now - link.written_at)
             self._handle(planner.on_reply(step, reply, now))
             slot = step.slot
             if slot is not None:
@@ -315,58 +285,6 @@ class BusMaster:
                         slot.intent,
                     )
                 )
-
-    async def _receive(self, exchange: Exchange, deadline: float) -> Reply | None:
-        """Read until a frame answers ``exchange``; None at the deadline."""
-        framer, transport, clock = self._framer, self._transport, self._clock
-        gap_s = self.plan.gap_s
-        last_rx = clock.now()
-        while True:
-            read_deadline = min(deadline, last_rx + gap_s) if framer.buffered else deadline
-            try:
-                chunk = await transport.read(read_deadline)
-            except ReplyTimeout:
-                # A gap (or the deadline): an unfinished frame will not be completed.
-                framer.reset()
-                reply = self._drain_framer(exchange)
-                if reply is not None or read_deadline >= deadline:
-                    return reply
-                continue
-            last_rx = clock.now()
-            framer.feed(chunk)
-            reply = self._drain_framer(exchange)
-            if reply is not None:
-                return reply
-
-    def _drain_framer(self, exchange: Exchange) -> Reply | None:
-        stats = self.stats
-        while (piece := self._framer.next_frame()) is not None:
-            if isinstance(piece, Frame):
-                try:
-                    reply = self.codec.parse(exchange, piece.data)
-                except UnexpectedReply:
-                    stats.unexpected += 1
-                    self._record("unexpected", piece.data)
-                    continue
-                except (MalformedReply, ProtocolError):
-                    stats.malformed += 1
-                    self._record("malformed", piece.data)
-                    continue
-                self._framer_leftovers()
-                return reply
-            stats.noise_bytes += len(piece.data)
-            if piece.reason is SkipReason.CHECKSUM:
-                stats.checksum_errors += 1
-            self._record(str(piece.reason), piece.data)
-        return None
-
-    def _framer_leftovers(self) -> None:
-        """Bytes after the reply are late or noise; they are discarded before the next write."""
-        while (piece := self._framer.next_frame()) is not None:
-            self.stats.late_bytes += len(piece.data)
-        self._framer.reset()
-        while (piece := self._framer.next_frame()) is not None:
-            self.stats.late_bytes += len(piece.data)
 
     async def _idle(self, wakeup: float | None) -> None:
         """Nothing to send: wait for a command, or for the next probe to fall due."""
@@ -398,7 +316,7 @@ class BusMaster:
                     "drive.went_offline",
                     drive=drive.name,
                     address=drive.address,
-                    recent_frames=list(self.recent_frames),
+                    recent_frames=self.recent_frames,
                 )
             self._deferred.append(
                 partial(self._observer.drive_availability, self.plan.name, drive, online, now)
@@ -427,33 +345,26 @@ class BusMaster:
             for call in deferred:
                 call()
 
-    def _record(self, kind: str, data: bytes) -> None:
-        self.recent_frames.append((kind, data.hex(" ")))
+    @property
+    def recent_frames(self) -> list[str]:
+        """The line's last frames and events, oldest first (the flight recorder)."""
+        return self._link.recent_frames()
 
     def _count_request(self, step: Step) -> None:
-        stats = self.stats
-        stats.requests += 1
         if step.pending is not None and step.pending.attempts:
-            stats.retries += 1
-        if not step.exchange.expects_reply:
-            stats.broadcasts += 1
+            self.stats.retries += 1
         if step.slot is not None:
-            stats.drives[step.slot.name].requests += 1
+            self.stats.drives[step.slot.name].requests += 1
 
     def _count_reply(self, step: Step, reply: Reply, latency: float) -> None:
-        stats = self.stats
-        stats.replies += 1
-        stats.latency.observe(latency)
         if step.slot is not None:
-            drive = stats.drives[step.slot.name]
+            drive = self.stats.drives[step.slot.name]
             drive.replies += 1
             drive.last_latency_s = latency
             if reply.error is not None:
                 drive.refused += 1
 
     def _count_failure(self, step: Step) -> None:
-        self.stats.timeouts += 1
-        self._record("timeout", step.exchange.request)
         if step.slot is not None:
             self.stats.drives[step.slot.name].timeouts += 1
             if step.kind is StepKind.POLL:

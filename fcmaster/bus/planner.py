@@ -49,9 +49,12 @@ from fcmaster.protocol.codec import DriveCodec, Exchange, ParameterKey, Reply
 from fcmaster.protocol.drive import ControlIntent, Motion
 
 _STOPPING = (Motion.STOP, Motion.COAST, Motion.QUICK_STOP)
+REFERENCE_LIMIT_PCT = 199.99  # the most a reference can say (FC: 0x7FFF); adoption stays below
 _MOTION_ACTIONS = frozenset(
     (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE)
 )
+# What one telegram to every drive may carry: whole states, never a change of part of one.
+_BROADCASTS = frozenset((Action.START, Action.STOP, Action.COAST, Action.QUICK_STOP))
 # Actions that change only part of the commanded state, so the rest must be known first
 # (so does a start that keeps the present reference).
 _RELATIVE_ACTIONS = frozenset((Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE, Action.RESET))
@@ -79,6 +82,9 @@ class DriveSlot:
     urgent_reads: deque[ParameterKey] = field(default_factory=deque)
     fault: bool = False
     warning: bool = False
+    running: bool | None = None  # as the last status said; None: not known yet
+    reverse: bool = False
+    output_pct: float | None = None  # the last output reported, in % of nominal
 
     @property
     def name(self) -> str:
@@ -162,6 +168,9 @@ class Planner:
         self._normal: deque[Pending] = deque()
         self._next_poll = 0
         self._in_flight: Pending | None = None  # the command whose step is on the wire
+        # how to take back the poll or probe last chosen: slot, round-robin position,
+        # rotation cursor, urgent read taken, probe time
+        self._undo: tuple[DriveSlot, int, int, ParameterKey | None, float] | None = None
 
     # -- commands in -------------------------------------------------------------------
 
@@ -194,8 +203,15 @@ class Planner:
         if name is not None and slot is None:
             return _result(Outcome.INVALID, f"no drive called {name!r} on {self.plan.name}")
         targets = [slot] if slot is not None else self.slots
-        if slot is None and not action.is_control:
-            return _result(Outcome.INVALID, "only control actions can be broadcast")
+        if slot is None:
+            reason = self._broadcast_refusal(command)
+            if reason:
+                return _result(Outcome.INVALID, reason)
+        if action is Action.WRITE and slot is not None and not slot.plan.control:
+            return _result(
+                Outcome.NOT_ALLOWED,
+                f"{slot.name} is monitor-only: writing its parameters needs control: bus",
+            )
         if action.is_control:
             monitor_only = [s.name for s in targets if not s.plan.control]
             if monitor_only:
@@ -219,6 +235,17 @@ class Planner:
             except UsageError as exc:
                 return _result(Outcome.INVALID, str(exc))
         return None
+
+    def _broadcast_refusal(self, command: Command) -> str:
+        """Why ``command`` cannot go to every drive at once ("" when it can)."""
+        if not self.codec.can_broadcast:
+            return f"{self.codec.protocol} has no broadcast; command the drives one by one"
+        if command.action not in _BROADCASTS:
+            allowed = ", ".join(sorted(a.value for a in _BROADCASTS))
+            return f"only {allowed} can be broadcast (one telegram sets every drive alike)"
+        if command.action is Action.START and command.reference_pct is None:
+            return "a broadcast start needs a reference: every drive gets the same one"
+        return ""
 
     def _supersede(self, slot: DriveSlot | None, command: Command) -> list[Completion]:
         """A stop makes queued motion commands for the same drive moot.
@@ -277,8 +304,7 @@ class Planner:
         started again by the master on its own.
         """
         for slot in self.slots:
-            if slot.intent is not None and slot.intent.motion not in _STOPPING:
-                slot.intent = None
+            _forget(slot)
 
     @property
     def has_commands(self) -> bool:
@@ -295,6 +321,7 @@ class Planner:
             return self._command_step(queue[0])
         for slot in self.slots:
             if slot.online is False and slot.next_probe_at <= now:
+                self._undo = (slot, self._next_poll, slot.cursor, None, slot.next_probe_at)
                 slot.next_probe_at = now + self.plan.probe_interval_s
                 exchange = self.codec.poll(slot.address, _stopping_only(slot.intent), None)
                 return Step(StepKind.PROBE, exchange, slot)
@@ -302,9 +329,25 @@ class Planner:
         for offset in range(count):
             slot = self.slots[(self._next_poll + offset) % count]
             if slot.online is not False:
+                urgent = slot.urgent_reads[0] if slot.urgent_reads else None
+                self._undo = (slot, self._next_poll, slot.cursor, urgent, slot.next_probe_at)
                 self._next_poll = (self._next_poll + offset + 1) % count
                 return Step(StepKind.POLL, self._poll(slot), slot)
         return None
+
+    def retract(self, step: Step) -> None:
+        """Take back the poll or probe :meth:`next_step` just chose, not sent yet.
+
+        The master calls this when a command arrived while it waited out the pause: the
+        command goes first, and the poll stays due.
+        """
+        if step.kind is StepKind.COMMAND or self._undo is None or self._undo[0] is not step.slot:
+            raise ValueError("only the poll or probe just chosen can be taken back")
+        slot, next_poll, cursor, urgent, probe_at = self._undo
+        self._next_poll, slot.cursor, slot.next_probe_at = next_poll, cursor, probe_at
+        if urgent is not None:
+            slot.urgent_reads.appendleft(urgent)
+        self._undo = None
 
     def next_wakeup(self, now: float) -> float | None:
         """When a probe falls due, if nothing else is to do; None: only a command wakes us."""
@@ -407,8 +450,7 @@ class Planner:
                 slot.online = False
                 slot.next_probe_at = now + self.plan.probe_interval_s
                 slot.urgent_reads.clear()
-                if slot.intent is not None and slot.intent.motion not in _STOPPING:
-                    slot.intent = None  # adopt again when it returns
+                _forget(slot)  # adopt again when it returns
                 report.transitions.append(Transition(slot.plan, online=False))
         return report
 
@@ -418,11 +460,12 @@ class Planner:
         if slot.online is not True:
             slot.online = True
             report.transitions.append(Transition(slot.plan, online=True))
+        self._learn(slot, reply)
+        if slot.plan.control and slot.intent is None:
+            slot.intent = _adopted(slot)
         status = reply.status
         if status is None:
             return False
-        if slot.plan.control and slot.intent is None:
-            slot.intent = _adopted(slot.plan, reply)
         alarms_changed = status.fault != slot.fault
         warnings_changed = status.warning != slot.warning
         tripped = status.fault and not slot.fault
@@ -434,6 +477,25 @@ class Planner:
                 if key not in slot.urgent_reads:
                     slot.urgent_reads.append(key)
         return tripped
+
+    @staticmethod
+    def _learn(slot: DriveSlot, reply: Reply) -> None:
+        """Keep what the drive is doing, for adoption.
+
+        Protocols that read status and output in separate transactions (Mitsubishi, ENC)
+        tell it over several replies.
+        """
+        status = reply.status
+        if status is not None:
+            slot.running = status.running
+            if status.reverse is not None:
+                slot.reverse = status.reverse
+        if reply.output_pct is not None:
+            slot.output_pct = abs(reply.output_pct)
+            if reply.output_pct:
+                slot.reverse = reply.output_pct < 0 if status is None else slot.reverse
+        elif reply.output_frequency_hz is not None and slot.plan.nominal_frequency_hz:
+            slot.output_pct = abs(reply.output_frequency_hz) / slot.plan.nominal_frequency_hz * 100
 
     def _advance(self, pending: Pending, report: Report, reply: Reply | None) -> None:
         command = pending.command
@@ -484,6 +546,13 @@ class Planner:
         else:  # pragma: no cover - a step always serves the head of a queue
             raise AssertionError("finished a command that was not at the head of its queue")
         report.completions.append(_completion(pending, result))
+
+
+def _forget(slot: DriveSlot) -> None:
+    """What the drive was doing is no longer known: keep a stop, drop a motion."""
+    slot.running = slot.output_pct = None
+    if slot.intent is not None and slot.intent.motion not in _STOPPING:
+        slot.intent = None
 
 
 def _completion(pending: Pending, result: CommandResult) -> Completion:
@@ -548,13 +617,15 @@ def _apply(intent: ControlIntent, command: Command) -> ControlIntent:
     raise AssertionError(f"not a control action: {action}")  # pragma: no cover
 
 
-def _adopted(drive: DrivePlan, reply: Reply) -> ControlIntent:
-    """The intent that keeps a drive doing what it does now."""
-    status = reply.status
-    assert status is not None
-    if not status.running:
+def _adopted(slot: DriveSlot) -> ControlIntent | None:
+    """The intent that keeps a drive doing what it does now; None while that is not known.
+
+    A running drive is adopted only once its output is known too, so it is never commanded
+    to a reference it is not running at.
+    """
+    if slot.running is False:
         return ControlIntent(Motion.STOP)
-    pct = reply.output_pct
-    if pct is None and reply.output_frequency_hz is not None and drive.nominal_frequency_hz:
-        pct = reply.output_frequency_hz / drive.nominal_frequency_hz * 100.0
-    return ControlIntent(Motion.RUN, bool(status.reverse), abs(pct or 0.0))
+    if slot.running is None or slot.output_pct is None:
+        return None
+    pct = min(slot.output_pct, REFERENCE_LIMIT_PCT)
+    return ControlIntent(Motion.RUN, slot.reverse, pct)

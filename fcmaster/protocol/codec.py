@@ -123,6 +123,7 @@ class DriveCodec(Protocol):
 
     protocol: str
     addresses: range  # the drive addresses this protocol (and address format) can reach
+    can_broadcast: bool  # whether control(0, …) reaches every drive at once
 
     def new_framer(self) -> Framer:
         """A framer for the replies of this protocol."""

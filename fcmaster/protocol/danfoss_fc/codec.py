@@ -103,6 +103,7 @@ class FcCodec:
     """Danfoss FC exchanges for one bus (one address format)."""
 
     protocol = "danfoss-fc"
+    can_broadcast = True  # ADR 0x80 / 0x20, obeyed and never answered (§5.2)
 
     def __init__(self, address_format: AddressFormat = AddressFormat.FORMAT_126) -> None:
         self.address_format = address_format

@@ -100,6 +100,7 @@ class EncCodec:
     """
 
     protocol = "enc"
+    can_broadcast = True  # address 127 (F2.15), obeyed and never answered
 
     def __init__(
         self,

@@ -93,6 +93,7 @@ class MitsubishiCodec:
     """Mitsubishi computer-link exchanges for one bus (one terminator, one waiting time)."""
 
     protocol = "mitsubishi"
+    can_broadcast = False  # station 0 is a real drive; the link has no broadcast
     addresses = range(0, 32)  # stations 0-31; the link has no broadcast, 0 is a drive
 
     def __init__(

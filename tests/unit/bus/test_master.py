@@ -199,7 +199,7 @@ async def test_urgent_stop_overtakes_commands_queued_before_it() -> None:
         count = len(b.transport.sent)
         drive = b.master.drive("a")
         read = b.submit(drive.read("16-13"))
-        write = b.submit(b.master.drive("m").write("3-41", 5.0))
+        write = b.submit(b.master.drive("m").read("3-41"))  # a monitor drive may be read
         stop = b.submit(drive.coast())
         for task in (read, write, stop):
             await b.complete(task)

@@ -425,7 +425,7 @@ def test_broadcast_is_sent_to_address_0_and_done_once_sent() -> None:
         pytest.param("x", STOP, Outcome.INVALID, "no drive called 'x'", id="unknown-drive"),
         pytest.param(
             None, Command(action=Action.READ, parameter="16-13"), Outcome.INVALID,
-            "only control actions", id="broadcast-read",
+            "can be broadcast", id="broadcast-read",
         ),
         pytest.param("m", STOP, Outcome.NOT_ALLOWED, "m is monitor-only", id="monitor-only"),
         pytest.param(None, STOP, Outcome.NOT_ALLOWED, "m is monitor-only", id="broadcast"),
@@ -842,3 +842,86 @@ PlannerMachine.TestCase.settings = settings(
     suppress_health_check=[HealthCheck.too_slow],
 )
 test_planner_invariants_hold_under_random_sequences = PlannerMachine.TestCase
+
+
+# -- adoption across replies, broadcasts, writes, retracting a poll ----------------------
+
+
+def test_a_running_drive_is_adopted_only_once_its_output_is_known() -> None:
+    # Mitsubishi and ENC read status and output frequency in separate transactions.
+    p = planner(DrivePlan(name="a", address=1, control=True, nominal_frequency_hz=50.0))
+    step = take(p)
+    status_only = Reply(address=1, status=reply(1, running=True).status)
+    p.on_reply(step, status_only, 0.0)
+    assert p.slot("a").intent is None  # running, at an unknown speed: not adopted yet
+    step = take(p)
+    assert telegram(step).pcd1 == 0x0000  # so the next poll still does not command it
+    p.on_reply(step, Reply(address=1, output_frequency_hz=30.0), 0.0)
+    intent = p.slot("a").intent
+    assert intent is not None
+    assert intent.reference_pct == 60.0  # 30 Hz of a 50 Hz nominal
+
+
+def test_a_stopped_drive_is_adopted_from_its_status_alone() -> None:
+    p = planner(DrivePlan(name="a", address=1, control=True))
+    step = take(p)
+    p.on_reply(step, Reply(address=1, status=reply(1).status), 0.0)
+    assert telegram(take(p)).pcd1 == 0x043C  # a stop word from now on
+
+
+@pytest.mark.parametrize(
+    ("command", "reason"),
+    [
+        (set_reference(20.0), "only coast, quick_stop, start, stop can be broadcast"),
+        (Command(action=Action.RESET), "can be broadcast"),
+        (start(), "a broadcast start needs a reference"),
+    ],
+    ids=["set_reference", "reset", "start-without-reference"],
+)
+def test_broadcasts_carry_only_whole_states(command: Command, reason: str) -> None:
+    p = planner(DrivePlan(name="a", address=1, control=True))
+    ((completion,),) = [p.submit(None, command, "t")]
+    assert completion.result.outcome is Outcome.INVALID
+    assert reason in completion.result.reason
+
+
+def test_a_broadcast_start_with_a_reference_goes_to_address_0() -> None:
+    p = planner(DrivePlan(name="a", address=1, control=True))
+    assert p.submit(None, start(40.0), "t") == []
+    request = telegram(take(p))
+    assert request.address == 0
+    assert request.pcd2 == encode_reference(40.0)
+
+
+def test_parameter_writes_to_a_monitor_only_drive_are_not_allowed() -> None:
+    p = planner(DrivePlan(name="m", address=3))
+    write = Command(action=Action.WRITE, parameter="3-41", value=5.0)
+    ((completion,),) = [p.submit("m", write, "t")]
+    assert completion.result.outcome is Outcome.NOT_ALLOWED
+    assert "needs control: bus" in completion.result.reason
+    read = Command(action=Action.READ, parameter="3-41")
+    assert p.submit("m", read, "t") == []  # reading is fine
+
+
+def test_a_retracted_poll_is_chosen_again_after_the_command() -> None:
+    p = planner(DrivePlan(name="a", address=1), DrivePlan(name="b", address=2))
+    first = take(p)
+    p.on_reply(first, reply(1), 0.0)
+    poll = take(p)  # b's poll, chosen before the pause
+    assert poll.slot is not None
+    assert poll.slot.name == "b"
+    p.submit("a", Command(action=Action.READ, parameter="16-14"), "t")
+    p.retract(poll)
+    command = take(p)
+    assert command.kind is StepKind.COMMAND
+    p.on_reply(command, reply(1), 0.0)
+    again = take(p)
+    assert again.kind is StepKind.POLL
+    assert again.exchange.request == poll.exchange.request  # same drive, same rotation item
+
+
+def test_only_the_step_just_chosen_can_be_retracted() -> None:
+    p = planner(DrivePlan(name="a", address=1))
+    p.submit("a", Command(action=Action.READ, parameter="16-14"), "t")
+    with pytest.raises(ValueError, match="only the poll or probe"):
+        p.retract(take(p))
