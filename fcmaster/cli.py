@@ -19,7 +19,7 @@ from fcmaster.clock import new_event_loop
 from fcmaster.errors import BusError, CommandError, ConfigError, FcmasterError, UsageError
 
 PROTOCOLS = ("danfoss-fc", "mitsubishi", "enc")
-DEMO_CONFIG = Path(__file__).resolve().parent.parent / "config" / "demo.yaml"
+DEMO_CONFIG = Path(__file__).resolve().parent / "demo.yaml"  # config/demo.yaml links here
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -115,6 +115,12 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--link", help="also make this path a symbolic link to the pty")
     sim.add_argument("--faults", default="", help="e.g. drop=0.05,corrupt=0.01,late=0.01,echo")
     sim.add_argument("--response-delay-ms", type=float, help="every drive's 8-35 (default 10)")
+
+    monitor = commands.add_parser("monitor", help="a running daemon's fleet as a live table")
+    monitor.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
+    monitor.add_argument("--token", help="a viewer token (default: $FCM_TOKEN)")
+    monitor.add_argument("--once", action="store_true", help="print one table and exit")
+    monitor.add_argument("--interval", type=float, default=0.5, help="seconds between redraws")
 
     decode = commands.add_parser(
         "decode",
@@ -233,6 +239,12 @@ def _cmd_decode(args: argparse.Namespace) -> int:
     )
 
 
+def _cmd_monitor(args: argparse.Namespace) -> int:
+    from fcmaster.commands import monitor
+
+    return _run_async(monitor.run(args.url, args.token, once=args.once, interval_s=args.interval))
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "run": _cmd_run,
     "check": _cmd_check,
@@ -243,6 +255,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "control": _cmd_control,
     "decode": _cmd_decode,
     "sim": _cmd_sim,
+    "monitor": _cmd_monitor,
 }
 
 

@@ -178,9 +178,12 @@ class Service:
 
     def _adapter(self, target: str, model: Any) -> AbstractAsyncContextManager[Any]:
         module, _, name = target.partition(":")
-        adapter: AbstractAsyncContextManager[Any] = getattr(importlib.import_module(module), name)(
-            model, self, demo=self.demo
-        )
+        options: dict[str, Any] = {"demo": self.demo}
+        if target == ADAPTERS["http"]:  # /metrics is served on the HTTP listener
+            metrics = self.config.model.metrics
+            options["metrics_enabled"] = metrics is not None and metrics.enabled
+        factory = getattr(importlib.import_module(module), name)
+        adapter: AbstractAsyncContextManager[Any] = factory(model, self, **options)
         return adapter
 
     async def _stop_drives(self) -> None:

@@ -67,5 +67,5 @@ async def run(path: Path, *, demo: bool) -> int:
     config = config_module.load(path)
     logsetup.configure(config.model.logging.level, config.model.logging.format)
     log.info("config.loaded", path=str(path), demo=demo)
-    await Service(config).run()
+    await Service(config, demo=demo).run()
     return 0

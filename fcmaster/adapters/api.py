@@ -1,0 +1,371 @@
+"""The HTTP API as a FastAPI application: routes, roles, and outcome → status.
+
+Every route reads the daemon through the :class:`~fcmaster.adapters.gateway.Gateway` only.
+Reads come from the fleet state in memory; commands and parameter access go through
+``gateway.execute`` and answer once the command has its one result, with the HTTP status
+of :data:`OUTCOME_STATUS` and the result JSON (``outcome``, ``reason``, …) as the body.
+Refusals before a command reaches a line (no or wrong token, a viewer's command, a
+malformed body) are logged as ``http.command_refused`` with the actor and the reason; the
+bus logs every command that reaches it as ``command.completed`` with the same actor.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any, Final
+
+import structlog
+from fastapi import Body, Depends, FastAPI, Query, Request, Security, WebSocket
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.responses import Response
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException
+from starlette.requests import ClientDisconnect
+
+from fcmaster import __version__
+from fcmaster.adapters import metrics
+from fcmaster.adapters.auth import Authenticator, AuthError, Principal, Role
+from fcmaster.adapters.commands import parse_command
+from fcmaster.adapters.gateway import Gateway
+from fcmaster.adapters.middleware import (
+    BodyLimit,
+    SecurityHeaders,
+    error_body,
+    json_response,
+    states_json,
+)
+from fcmaster.adapters.schemas import (
+    CommandUnion,
+    DriveOut,
+    ErrorOut,
+    LineOut,
+    ParameterOut,
+    ParameterWrite,
+    PrincipalOut,
+    ResultOut,
+)
+from fcmaster.adapters.stream import StreamRegistry, serve_stream
+from fcmaster.bus.commands import Command, CommandResult, Outcome
+from fcmaster.errors import UsageError
+
+log = structlog.get_logger("fcmaster.adapters.http")
+
+STATIC: Final = Path(__file__).resolve().parent / "static"
+MAX_BODY_BYTES: Final = 64 * 1024
+
+OUTCOME_STATUS: Final = {
+    Outcome.DONE: 200,  # carried out
+    Outcome.REFUSED: 409,  # the drive said no (its error code in "error"): a state conflict
+    Outcome.NOT_ALLOWED: 403,  # monitor-only drive, or beyond the drive's configured limits
+    Outcome.INVALID: 422,  # malformed, or a parameter the protocol cannot address
+    Outcome.TIMEOUT: 504,  # the drive did not answer after the line's retries
+    Outcome.CANCELLED: 503,  # shutdown, line down or lost, or superseded by a stop
+}
+
+DESCRIPTION: Final = """\
+The fcmaster daemon's API: the fleet's drive states, commands, parameter access, line
+statistics, an event stream (WebSocket `/api/v1/stream`) and Prometheus metrics (`/metrics`).
+
+**Tokens.** Send `Authorization: Bearer <token>`. A `viewer` token reads; an `operator`
+token also commands drives and writes parameters. Without tokens configured, or with
+`http.anonymous: viewer`, reads from this machine's loopback need no token. The WebSocket
+also takes the token as `?token=`, since browsers cannot set its headers.
+
+**Commands** answer once the command has its one result; the status follows its outcome:
+
+| outcome | status | meaning |
+|---|---|---|
+| `done` | 200 | carried out (`value`, `unit`, `raw` for reads) |
+| `refused` | 409 | the drive said no; `error` has its code and text |
+| `not_allowed` | 403 | monitor-only drive, or beyond its configured limits (`reason` names them) |
+| `invalid` | 422 | malformed, or a parameter the protocol cannot address |
+| `timeout` | 504 | no answer from the drive after the line's retries |
+| `cancelled` | 503 | the daemon is shutting down, the line is down, or a stop superseded it |
+
+A 401 means no or an unknown token, a 403 without `outcome` a role too low for the request,
+a 404 an unknown drive, a 400 a body that is not JSON text, a 413 one over 64 KiB.
+"""
+
+_bearer = HTTPBearer(auto_error=False, description="a token from http.tokens")
+
+_AUTH_ERRORS: Final[dict[int | str, dict[str, Any]]] = {
+    401: {"model": ErrorOut, "description": "No token, or not a known one"},
+}
+_DRIVE_ERRORS: Final[dict[int | str, dict[str, Any]]] = {
+    **_AUTH_ERRORS,
+    404: {"model": ErrorOut, "description": "No drive of that name"},
+    422: {"model": ResultOut | ErrorOut, "description": "Malformed request"},
+}
+_COMMAND_ERRORS: Final[dict[int | str, dict[str, Any]]] = {
+    **_DRIVE_ERRORS,
+    400: {"model": ErrorOut, "description": "The body is not JSON text"},
+    403: {"model": ResultOut | ErrorOut, "description": "not_allowed, or not an operator"},
+    409: {"model": ResultOut, "description": "refused by the drive"},
+    413: {"model": ErrorOut, "description": "Body too large"},
+    503: {"model": ResultOut, "description": "cancelled"},
+    504: {"model": ResultOut, "description": "timeout"},
+}
+
+
+def result_response(result: CommandResult, **extra: Any) -> Response:
+    """A command result with the status of its outcome."""
+    return json_response({**result.to_json(), **extra}, OUTCOME_STATUS[result.outcome])
+
+
+def _describe(error: dict[str, Any]) -> str:
+    where = ".".join(str(part) for part in error.get("loc", ()))
+    if error.get("type") == "json_invalid":
+        return f"the body is not valid JSON: {error.get('ctx', {}).get('error', 'unreadable')}"
+    return f"{where}: {error.get('msg', 'invalid')}"
+
+
+async def _peek_action(request: Request) -> str | None:
+    try:
+        payload = json.loads(await request.body())
+    except (ValueError, ClientDisconnect, HTTPException):  # not JSON, gone, or too large
+        return None
+    action = payload.get("action") if isinstance(payload, dict) else None
+    return action if isinstance(action, str) else None
+
+
+def _caller(
+    request: Request,
+    _: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)],
+) -> Principal:
+    auth: Authenticator = request.app.state.auth
+    return auth.authenticate(
+        request.headers.get("authorization"),
+        client_host=request.client.host if request.client else None,
+        host_header=request.headers.get("host"),
+    )
+
+
+def _operator(principal: Annotated[Principal, Depends(_caller)]) -> Principal:
+    Authenticator.require(principal, Role.OPERATOR)
+    return principal
+
+
+Viewer = Annotated[Principal, Depends(_caller)]
+Operator = Annotated[Principal, Depends(_operator)]
+
+
+def create_app(
+    gateway: Gateway,
+    auth: Authenticator,
+    *,
+    metrics_enabled: bool = True,
+    cors_origins: tuple[str, ...] = (),
+    streams: StreamRegistry | None = None,
+) -> FastAPI:
+    """The API for ``gateway``, guarded by ``auth``."""
+    app = FastAPI(
+        title="fcmaster",
+        version=__version__,
+        description=DESCRIPTION,
+        openapi_url="/api/v1/openapi.json",
+        docs_url=None,  # Swagger UI and ReDoc load from a CDN; the dashboard loads nothing
+        redoc_url=None,
+    )
+    registry = streams if streams is not None else StreamRegistry()
+    app.state.auth = auth
+
+    async def run(
+        name: str, payload: dict[str, Any], principal: Principal, **extra: Any
+    ) -> Response:
+        """Validate ``payload`` as a command for drive ``name``, carry it out, answer."""
+        plan = gateway.drive_plan(name)
+        if plan is None or gateway.fleet.find(name) is None:
+            reason = f"no drive called {name!r}"
+            _log_refused(principal.name, name, payload.get("action"), "invalid", reason)
+            raise HTTPException(404, reason)
+        try:
+            command: Command = parse_command(payload, plan, actor=principal.name)
+        except UsageError as exc:
+            _log_refused(principal.name, name, payload.get("action"), "invalid", str(exc))
+            return result_response(CommandResult(outcome=Outcome.INVALID, reason=str(exc)), **extra)
+        return result_response(await gateway.execute(name, command), **extra)
+
+    # -- errors ------------------------------------------------------------------------
+
+    @app.exception_handler(AuthError)
+    async def _autherror_body(request: Request, exc: AuthError) -> Response:
+        if request.method in ("POST", "PUT"):
+            _log_refused(
+                exc.actor,
+                request.path_params.get("name"),
+                await _peek_action(request),
+                "forbidden" if exc.status == 403 else "unauthorized",
+                exc.reason,
+            )
+        headers = {"WWW-Authenticate": "Bearer"} if exc.status == 401 else None
+        return json_response(error_body(exc.reason), exc.status, headers=headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, exc: RequestValidationError) -> Response:
+        errors = jsonable_encoder(exc.errors())
+        reason = "; ".join(_describe(e) for e in errors)
+        if request.method in ("POST", "PUT"):
+            actor = _actor(auth, request)
+            _log_refused(
+                actor,
+                request.path_params.get("name"),
+                await _peek_action(request),
+                "invalid",
+                reason,
+            )
+        return json_response({"outcome": "invalid", **error_body(reason, errors)}, 422)
+
+    @app.exception_handler(HTTPException)
+    async def _httperror_body(request: Request, exc: HTTPException) -> Response:
+        return json_response(error_body(str(exc.detail)), exc.status_code, headers=exc.headers)
+
+    # -- reads -------------------------------------------------------------------------
+
+    @app.get("/api/v1/drives", response_model=list[DriveOut], responses=_AUTH_ERRORS)
+    async def drives(_: Viewer, bus: str | None = None) -> Response:
+        """Every drive's state, in configuration order (``bus``: one line's only)."""
+        states = [s for s in gateway.fleet.snapshot() if bus is None or s.bus == bus]
+        return Response(await states_json(states), media_type="application/json")
+
+    @app.get(
+        "/api/v1/drives/{name}",
+        response_model=DriveOut,
+        responses={**_AUTH_ERRORS, 404: _DRIVE_ERRORS[404]},
+    )
+    async def drive(name: str, _: Viewer) -> Response:
+        """One drive's state."""
+        state = gateway.fleet.find(name)
+        if state is None:
+            raise HTTPException(404, f"no drive called {name!r}")
+        return json_response(state.to_json())
+
+    @app.get("/api/v1/buses", response_model=list[LineOut], responses=_AUTH_ERRORS)
+    async def buses(_: Viewer) -> Response:
+        """Every line with its statistics (histogram buckets end at ``le: "+Inf"``)."""
+        return json_response([line.to_json() for line in gateway.lines()])
+
+    @app.get("/api/v1/whoami", response_model=PrincipalOut, responses=_AUTH_ERRORS)
+    async def whoami(principal: Viewer) -> Response:
+        """The caller's name and role, as the API sees them."""
+        return json_response({"name": principal.name, "role": principal.role.name.lower()})
+
+    # -- commands ----------------------------------------------------------------------
+
+    @app.post("/api/v1/drives/{name}/commands", response_model=ResultOut, responses=_COMMAND_ERRORS)
+    async def command(
+        name: str, body: Annotated[CommandUnion, Body(discriminator="action")], principal: Operator
+    ) -> Response:
+        """Carry out a command; answers its one result (status by outcome)."""
+        extra = {} if body.id is None else {"id": body.id}
+        payload = body.model_dump(exclude_none=True, exclude={"id"})
+        return await run(name, payload, principal, **extra)
+
+    @app.get(
+        "/api/v1/drives/{name}/parameters/{param}",
+        response_model=ParameterOut,
+        responses={k: v for k, v in _COMMAND_ERRORS.items() if k not in (400, 413)},
+    )
+    async def read_parameter(
+        name: str,
+        param: str,
+        principal: Viewer,
+        index: Annotated[int, Query(ge=0, le=65535)] = 0,
+    ) -> Response:
+        """Read a parameter, named as the drive's manual writes it (e.g. ``16-13``)."""
+        payload = {"action": "read", "parameter": param, "index": index}
+        return await run(name, payload, principal, parameter=param, index=index)
+
+    @app.put(
+        "/api/v1/drives/{name}/parameters/{param}",
+        response_model=ParameterOut,
+        responses=_COMMAND_ERRORS,
+    )
+    async def write_parameter(
+        name: str,
+        param: str,
+        body: ParameterWrite,
+        principal: Operator,
+        index: Annotated[int, Query(ge=0, le=65535)] = 0,
+    ) -> Response:
+        """Write a parameter (``persist``: to non-volatile memory too)."""
+        payload = {
+            "action": "write",
+            "parameter": param,
+            "index": index,
+            "value": body.value,
+            "persist": body.persist,
+        }
+        return await run(name, payload, principal, parameter=param, index=index)
+
+    # -- metrics, stream, dashboard ----------------------------------------------------
+
+    if metrics_enabled:
+
+        @app.get(
+            "/metrics",
+            response_class=Response,
+            responses={200: {"content": {metrics.CONTENT_TYPE: {}}}, **_AUTH_ERRORS},
+        )
+        async def metrics_page(_: Viewer) -> Response:
+            """Prometheus metrics (text exposition format 0.0.4), from the state in memory."""
+            text = await metrics.render_async(
+                gateway.fleet.snapshot(), gateway.lines(), gateway.hub
+            )
+            return Response(text, media_type=metrics.CONTENT_TYPE)
+
+    @app.websocket("/api/v1/stream")
+    async def stream(websocket: WebSocket) -> None:
+        await serve_stream(websocket, gateway, auth, registry, cors_origins=cors_origins)
+
+    index_html = (STATIC / "index.html").read_bytes()
+
+    @app.get("/", include_in_schema=False)
+    async def dashboard() -> Response:
+        return Response(index_html, media_type="text/html; charset=utf-8", headers=_PAGE_HEADERS)
+
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")
+    app.add_middleware(SecurityHeaders)
+    if cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=list(cors_origins),
+            allow_methods=["GET", "POST", "PUT"],
+            allow_headers=["Authorization", "Content-Type"],
+        )
+    app.add_middleware(BodyLimit, limit=MAX_BODY_BYTES)
+    return app
+
+
+_PAGE_HEADERS: Final = {
+    "Content-Security-Policy": (
+        "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
+        "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+    ),
+    "Cache-Control": "no-cache",
+}
+
+
+def _actor(auth: Authenticator, request: Request) -> str:
+    try:
+        return auth.authenticate(
+            request.headers.get("authorization"),
+            client_host=request.client.host if request.client else None,
+            host_header=request.headers.get("host"),
+        ).name
+    except AuthError:
+        return "-"
+
+
+def _log_refused(actor: str, drive: object, action: object, outcome: str, reason: str) -> None:
+    log.info(
+        "http.command_refused",
+        actor=actor or "-",
+        drive=drive,
+        command=action if isinstance(action, str) else None,
+        outcome=outcome,
+        reason=reason,
+    )

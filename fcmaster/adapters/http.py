@@ -1,0 +1,225 @@
+"""The HTTP adapter: the API, its WebSocket stream, the dashboard and /metrics, in-process.
+
+Theory of operation
+-------------------
+:class:`HttpAdapter` is an async context manager the service enters once the lines are up.
+Entering binds the listening socket itself (so a taken port is a clear error, and port 0
+works for tests), builds the FastAPI application of :mod:`fcmaster.adapters.api` and runs
+uvicorn's server as a task in the daemon's own event loop: no thread, no second loop, and
+the API reads the same fleet state the bus writes, without copying or locking. uvicorn's
+signal capture is switched off — SIGTERM and SIGINT belong to the service, which leaves
+this context on shutdown. Leaving ends every open stream (clients are told the server is
+going away), lets requests in progress finish for a bounded time, and closes the socket.
+
+Safety rules (DESIGN.md "Safety and trust"): the listener is 127.0.0.1:8080 unless
+``http.listen`` says otherwise; with no tokens configured the API is read-only and must
+listen on loopback (anything else is refused at start, naming ``http.listen``); CORS is off
+unless ``http.cors_origins`` lists origins. With ``demo=True`` an operator token is made up
+at start and printed, so the demo dashboard's buttons work.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import secrets
+import socket
+from collections.abc import Iterator
+from types import TracebackType
+
+import structlog
+import uvicorn
+
+from fcmaster.adapters.api import MAX_BODY_BYTES, create_app
+from fcmaster.adapters.auth import Authenticator, Role, is_loopback_host, split_host_port
+from fcmaster.adapters.gateway import Gateway
+from fcmaster.adapters.stream import StreamRegistry
+from fcmaster.config import HttpModel
+from fcmaster.errors import ConfigError
+
+log = structlog.get_logger("fcmaster.adapters.http")
+
+DEFAULT_PORT = 8080
+SHUTDOWN_GRACE_S = 2  # requests in progress (a command awaiting its result) may finish
+MAX_CONNECTIONS = 256  # beyond this uvicorn answers 503: bounded memory whatever happens
+DEMO_TOKEN_NAME = "demo-operator"
+
+
+def parse_listen(text: str) -> tuple[str, int]:
+    """``"127.0.0.1:8080"``, ``"[::1]:8080"``, ``"0.0.0.0"`` → host and port (8080)."""
+    stripped = text.strip()
+    if stripped.startswith("["):
+        raw = stripped.rpartition("]:")[2] if "]:" in stripped else None
+    else:
+        raw = stripped.partition(":")[2] if stripped.count(":") == 1 else None
+    host, port = split_host_port(stripped)
+    if not host or (raw is not None and not raw.isdigit()):
+        raise ConfigError([("http.listen", f"{text!r} is not like 127.0.0.1:8080")])
+    if port is not None and port > 65535:
+        raise ConfigError([("http.listen", f"port {port} is beyond 65535")])
+    return host, DEFAULT_PORT if port is None else port
+
+
+class _Server(uvicorn.Server):
+    """uvicorn's server without its signal handlers, telling when it accepts connections."""
+
+    def __init__(self, config: uvicorn.Config) -> None:
+        super().__init__(config)
+        self.ready = asyncio.Event()
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        """The service owns SIGTERM and SIGINT; uvicorn must not take them over."""
+        yield
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        """Start serving, then say so."""
+        await super().startup(sockets=sockets)
+        self.ready.set()
+
+
+class HttpAdapter:
+    """Serves the HTTP API, stream, dashboard and metrics while the context is entered.
+
+    Built by the service as ``HttpAdapter(model, gateway, demo=…)``; pass
+    ``metrics_enabled=False`` when the config's ``metrics.enabled`` is false.
+    """
+
+    def __init__(
+        self,
+        model: HttpModel,
+        gateway: Gateway,
+        *,
+        demo: bool = False,
+        metrics_enabled: bool = True,
+    ) -> None:
+        self.model = model
+        self.gateway = gateway
+        self.demo = demo
+        self.metrics_enabled = metrics_enabled
+        self.operator_token: str | None = None  # the demo's, once entered
+        self._streams = StreamRegistry()
+        self._server: _Server | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._socket: socket.socket | None = None
+        self._address: tuple[str, int] | None = None
+
+    @property
+    def url(self) -> str:
+        """The base URL it listens on, e.g. ``http://127.0.0.1:8080`` (once entered)."""
+        if self._address is None:
+            raise RuntimeError("the HTTP adapter is not running")
+        host, port = self._address
+        return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
+
+    def _authenticator(self, host: str) -> Authenticator:
+        tokens = [(t.name, Role[t.role.upper()], t.token) for t in self.model.tokens]
+        if not tokens and not is_loopback_host(host):
+            reason = (
+                f"{self.model.listen} is not a loopback address: with no http.tokens the API is "
+                "read-only and served on loopback only; listen on 127.0.0.1 or add tokens"
+            )
+            raise ConfigError([("http.listen", reason)])
+        if self.demo:
+            self.operator_token = secrets.token_urlsafe(24)
+            tokens.append((DEMO_TOKEN_NAME, Role.OPERATOR, self.operator_token))
+        return Authenticator(tokens, anonymous=self.model.anonymous == "viewer" or not tokens)
+
+    def _bind(self, host: str, port: int) -> socket.socket:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        try:
+            return socket.create_server((host, port), family=family, backlog=128)
+        except OSError as exc:
+            raise ConfigError(
+                [("http.listen", f"cannot listen on {host}:{port}: {exc.strerror or exc}")]
+            ) from exc
+
+    async def __aenter__(self) -> HttpAdapter:
+        if self._task is not None:
+            raise RuntimeError("the HTTP adapter is already running")
+        host, port = parse_listen(self.model.listen)
+        auth = self._authenticator(host)
+        app = create_app(
+            self.gateway,
+            auth,
+            metrics_enabled=self.metrics_enabled,
+            cors_origins=tuple(self.model.cors_origins),
+            streams=self._streams,
+        )
+        config = uvicorn.Config(
+            app,
+            log_config=None,  # structlog owns logging; uvicorn's own warnings still show
+            log_level="warning",
+            access_log=False,  # and so ?token= never lands in a log
+            lifespan="off",
+            ws="websockets-sansio",
+            ws_max_size=MAX_BODY_BYTES,
+            proxy_headers=False,  # the peer address decides loopback, not X-Forwarded-For
+            server_header=False,
+            limit_concurrency=MAX_CONNECTIONS,
+            timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+        )
+        self._socket = self._bind(host, port)
+        bound = self._socket.getsockname()
+        self._address = (str(bound[0]), int(bound[1]))
+        self._server = _Server(config)
+        self._task = asyncio.create_task(
+            self._server.serve(sockets=[self._socket]), name="http.server"
+        )
+        server = self._server
+        self._task.add_done_callback(lambda _: server.ready.set())  # failed as it started
+        await server.ready.wait()
+        if self._task.done():
+            task, self._task, self._server = self._task, None, None
+            self._socket.close()
+            self._socket = self._address = None
+            task.result()  # raises what stopped it
+            raise RuntimeError("the HTTP server stopped as it started")
+        self._task.add_done_callback(_report_end)
+        log.info(
+            "http.listening",
+            url=self.url,
+            tokens=len(self.model.tokens),
+            anonymous_reads=auth.anonymous,
+            metrics=self.metrics_enabled,
+            cors=bool(self.model.cors_origins),
+        )
+        if self.demo and self.operator_token is not None:
+            print(
+                f"fcmaster demo: dashboard at {self.url}/#token={self.operator_token}\n"
+                f"  operator token ({DEMO_TOKEN_NAME}): {self.operator_token}",
+                flush=True,
+            )
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        server, task, sock = self._server, self._task, self._socket
+        if server is None or task is None:
+            return
+        try:
+            self._streams.close_all()
+            server.should_exit = True
+            done, _ = await asyncio.wait((task,), timeout=SHUTDOWN_GRACE_S + 3.0)
+            if not done:
+                server.force_exit = True
+                task.cancel()
+                await asyncio.wait((task,))
+        finally:
+            if sock is not None:
+                sock.close()
+            self._server = self._task = self._socket = None
+            self._address = None
+            log.info("http.stopped")
+
+
+def _report_end(task: asyncio.Task[None]) -> None:
+    if task.cancelled():
+        return
+    failure = task.exception()
+    if failure is not None:
+        log.error("http.failed", error=repr(failure))

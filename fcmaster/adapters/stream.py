@@ -1,0 +1,148 @@
+"""The WebSocket event stream: one hub subscription and one serialising task per client.
+
+Theory of operation
+-------------------
+A client connects to ``/api/v1/stream`` (optionally ``?bus=`` and ``?drive=`` to narrow
+it), authenticates like any read (``Authorization`` header, or ``?token=`` from browsers),
+and is sent a ``snapshot`` of every drive and line, then one message per fleet event (see
+:mod:`fcmaster.adapters.messages`). The subscription is opened *before* the snapshot is
+taken, so nothing falls between the two.
+
+The bus never waits for a client: the hub files events with the subscription and returns;
+this client's own task takes them out, serialises them and sends. A slow client makes its
+own send wait (the socket's back-pressure), while its subscription conflates drive states
+(latest wins) and bounds discrete events, telling the client with a ``dropped`` message.
+A second task reads the client's side only to notice a disconnect at once.
+
+Browsers send ``Origin``; a stream is refused unless the origin is the page's own (same
+host) or listed in ``http.cors_origins``, so another site open in the operator's browser
+cannot read the fleet through a loopback connection.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from urllib.parse import urlsplit
+
+import structlog
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from fcmaster.adapters.auth import Authenticator, AuthError
+from fcmaster.adapters.gateway import Gateway
+from fcmaster.adapters.messages import event_json
+from fcmaster.adapters.middleware import states_json, strict_json
+from fcmaster.hub import Subscription
+
+log = structlog.get_logger("fcmaster.adapters.http")
+
+POLICY_VIOLATION = 1008
+GOING_AWAY = 1001
+
+
+class StreamRegistry:
+    """The open streams' subscriptions, so the adapter can end them all at shutdown."""
+
+    def __init__(self) -> None:
+        self._open: set[Subscription] = set()
+
+    def add(self, subscription: Subscription) -> None:
+        """Track an open stream."""
+        self._open.add(subscription)
+
+    def discard(self, subscription: Subscription) -> None:
+        """Forget a stream that ended."""
+        self._open.discard(subscription)
+
+    def close_all(self) -> None:
+        """End every open stream (their clients are told the server is going away)."""
+        for subscription in list(self._open):
+            subscription.close()
+
+    def __len__(self) -> int:
+        return len(self._open)
+
+
+def _origin_allowed(origin: str | None, host: str | None, allowed: tuple[str, ...]) -> bool:
+    if origin is None:  # not a browser
+        return True
+    if origin in allowed:
+        return True
+    return host is not None and urlsplit(origin).netloc.lower() == host.lower()
+
+
+async def serve_stream(
+    websocket: WebSocket,
+    gateway: Gateway,
+    auth: Authenticator,
+    registry: StreamRegistry,
+    *,
+    cors_origins: tuple[str, ...] = (),
+) -> None:
+    """Serve one stream client until it leaves or the adapter stops."""
+    headers = websocket.headers
+    if not _origin_allowed(headers.get("origin"), headers.get("host"), cors_origins):
+        await websocket.close(POLICY_VIOLATION, "origin not allowed")
+        return
+    token = websocket.query_params.get("token")
+    authorization = headers.get("authorization") or (f"Bearer {token}" if token else None)
+    try:
+        principal = auth.authenticate(
+            authorization,
+            client_host=websocket.client.host if websocket.client else None,
+            host_header=headers.get("host"),
+        )
+    except AuthError as exc:
+        await websocket.close(POLICY_VIOLATION, exc.reason)
+        return
+    bus = websocket.query_params.get("bus") or None
+    drive = websocket.query_params.get("drive") or None
+    subscription = gateway.hub.subscribe(bus=bus, drive=drive)
+    registry.add(subscription)
+    try:
+        await websocket.accept()
+        log.debug("http.stream_opened", actor=principal.name, bus=bus, drive=drive)
+        drives = await states_json(
+            s
+            for s in gateway.fleet.snapshot()
+            if (bus is None or s.bus == bus) and (drive is None or s.name == drive)
+        )
+        lines = strict_json(
+            [line.to_json() for line in gateway.lines() if bus in (None, line.name)]
+        )
+        await websocket.send_text(f'{{"type": "snapshot", "drives": {drives}, "buses": {lines}}}')
+        await _serve(websocket, subscription)
+    except (WebSocketDisconnect, OSError):
+        pass  # the client left while we were sending
+    finally:
+        subscription.close()
+        registry.discard(subscription)
+        log.debug("http.stream_closed", actor=principal.name, dropped=subscription.dropped)
+
+
+async def _serve(websocket: WebSocket, subscription: Subscription) -> None:
+    reader = asyncio.create_task(_until_disconnect(websocket), name="http.stream.reader")
+    writer = asyncio.create_task(_send_events(websocket, subscription), name="http.stream.writer")
+    try:
+        done, _ = await asyncio.wait((reader, writer), return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for task in (reader, writer):
+            task.cancel()
+        await asyncio.gather(reader, writer, return_exceptions=True)
+    if writer in done:
+        failure = writer.exception()
+        if failure is not None and not isinstance(failure, WebSocketDisconnect | OSError):
+            raise failure
+        if failure is None and reader not in done:  # the subscription ended: we are stopping
+            await websocket.close(GOING_AWAY, "fcmaster is stopping")
+
+
+async def _until_disconnect(websocket: WebSocket) -> None:
+    while True:
+        message = await websocket.receive()
+        if message["type"] == "websocket.disconnect":
+            return
+
+
+async def _send_events(websocket: WebSocket, subscription: Subscription) -> None:
+    async for item in subscription:
+        await websocket.send_text(strict_json(event_json(item)))
