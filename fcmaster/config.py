@@ -20,9 +20,10 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
+from urllib.parse import urlsplit
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
@@ -102,8 +103,9 @@ class TlsModel(_Model):
 class MqttModel(_Model):
     """The MQTT bridge."""
 
-    url: str = "mqtt://127.0.0.1:1883"
+    url: str = "mqtt://127.0.0.1:1883"  # mqtt://host[:1883] or mqtts://host[:8883]
     base_topic: str = "fcmaster"
+    status_topic: str | None = None  # None: {base_topic}/status; one per gateway on a shared base
     client_id: str | None = None
     username: str | None = None
     password: str | None = None
@@ -112,6 +114,41 @@ class MqttModel(_Model):
     deadband_pct: float = Field(default=0.5, ge=0)
     discovery: bool = False
     discovery_prefix: str = "homeassistant"
+    keepalive_s: int = Field(default=30, ge=5, le=3600)
+    reconnect_min_s: float = Field(default=1.0, gt=0)
+    reconnect_max_s: float = Field(default=60.0, gt=0)
+
+    @field_validator("url")
+    @classmethod
+    def _check_url(cls, url: str) -> str:
+        parts = urlsplit(url)
+        if parts.scheme not in ("mqtt", "mqtts"):
+            raise ValueError("use mqtt://host:port or mqtts://host:port")
+        if not parts.hostname:
+            raise ValueError("the URL names no host")
+        if parts.username is not None or parts.password is not None:
+            raise ValueError("put credentials in mqtt.username and mqtt.password")
+        _ = parts.port  # raises ValueError for a port that is not a number in range
+        return url
+
+    @model_validator(mode="after")
+    def _check_tls(self) -> MqttModel:
+        if self.tls is not None and urlsplit(self.url).scheme != "mqtts":
+            raise ValueError("a tls section needs an mqtts:// url (mqtt:// is plain TCP)")
+        if self.tls is not None and self.tls.key is not None and self.tls.cert is None:
+            raise ValueError("tls.key belongs to a client certificate: give tls.cert too")
+        if self.reconnect_min_s > self.reconnect_max_s:
+            raise ValueError("reconnect_min_s is above reconnect_max_s")
+        return self
+
+    @field_validator("base_topic", "status_topic", "discovery_prefix")
+    @classmethod
+    def _check_topic(cls, topic: str | None) -> str | None:
+        if topic is not None and (
+            not topic.strip("/") or set(topic) & {"+", "#"} or topic != topic.strip("/")
+        ):
+            raise ValueError("a topic without wildcards (+, #) or a leading or trailing /")
+        return topic
 
 
 class MetricsModel(_Model):
@@ -274,6 +311,11 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
         if bus.protocol != "danfoss-fc" and "address_format" in bus.model_fields_set:
             problems.append((f"{where}.address_format", "only danfoss-fc lines have one"))
         lines.append(_line(bus, tuple(drives)))
+    if model.mqtt is not None:  # names are topic levels: {base}/{bus}/{drive}/state
+        for b, bus in enumerate(model.buses):
+            _topic_level(bus.name, f"buses[{b}].name", problems)
+            for d, drive in enumerate(bus.drives):
+                _topic_level(drive.name, f"buses[{b}].drives[{d}].name", problems)
     if model.http is not None:
         secrets: dict[str, str] = {}
         for t, token in enumerate(model.http.tokens):
@@ -315,6 +357,11 @@ def _unique(
         problems.append((path, f"{what} {value!r} is already used at {seen[value]}"))
     else:
         seen[value] = path
+
+
+def _topic_level(name: str, path: str, problems: list[tuple[str, str]]) -> None:
+    if any(char in name for char in "/+#"):
+        problems.append((path, f"{name!r} cannot be an MQTT topic level (no /, + or #)"))
 
 
 def _span(addresses: range) -> str:

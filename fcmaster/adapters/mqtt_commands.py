@@ -1,0 +1,140 @@
+"""Commands that come in over MQTT, each with exactly one result (DESIGN.md "Commands").
+
+A command is checked where it arrives — JSON, an ``id``, a drive on the line its topic
+names, and the shared parser — and whatever fails is answered ``invalid`` at once, so it
+never reaches a line. A payload that is not a JSON object gets ``"id": null``. A valid
+command runs in a task of its own: a slow read never holds up a stop for another drive.
+Results go to the outbox, which keeps them across reconnects until the broker has them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from typing import Any
+
+import aiomqtt
+import structlog
+
+from fcmaster.adapters.commands import parse_command
+from fcmaster.adapters.gateway import Gateway
+from fcmaster.adapters.mqtt_outbox import Outbox
+from fcmaster.adapters.mqtt_topics import Topics, result_payload
+from fcmaster.bus.commands import Command, CommandResult, Outcome
+from fcmaster.errors import UsageError
+
+log = structlog.get_logger("fcmaster.adapters.mqtt")
+
+MAX_COMMAND_BYTES = 64 * 1024
+
+
+class CommandDesk:
+    """Takes command messages, runs the valid ones, and files one result for each."""
+
+    def __init__(self, gateway: Gateway, topics: Topics, outbox: Outbox, *, actor: str) -> None:
+        """Commands for ``gateway``'s drives; results filed in ``outbox``; logged as ``actor``."""
+        self._gateway = gateway
+        self._topics = topics
+        self._outbox = outbox
+        self.actor = actor
+        self.running: set[asyncio.Task[None]] = set()
+
+    def receive(self, message: aiomqtt.Message) -> None:
+        """Handle one message from a command topic (never blocks)."""
+        where = self._topics.parse_command(message.topic.value)
+        if where is None:
+            return
+        bus, drive = where
+        if message.retain:  # a stored command replayed on subscription: never run it again
+            log.warning("mqtt.retained_command_ignored", bus=bus, drive=drive)
+            return
+        payload = message.payload
+        try:
+            if not isinstance(payload, bytes | bytearray):
+                raise UsageError("the payload is not a JSON object")
+            if len(payload) > MAX_COMMAND_BYTES:
+                raise UsageError(f"the payload is longer than {MAX_COMMAND_BYTES} bytes")
+            data = json.loads(payload)
+        except UsageError as exc:
+            self._invalid(bus, drive, None, None, str(exc))
+            return
+        except (ValueError, RecursionError) as exc:
+            self._invalid(bus, drive, None, None, f"the payload is not valid JSON: {exc}")
+            return
+        self._command(bus, drive, data)
+
+    async def close(self, grace_s: float) -> None:
+        """Give running commands ``grace_s`` to end; the rest end ``cancelled``."""
+        if self.running:
+            await asyncio.wait(self.running, timeout=grace_s)
+        late = list(self.running)
+        for task in late:
+            task.cancel()
+        if late:
+            await asyncio.wait(late)
+
+    def _command(self, bus: str, drive: str, data: Any) -> None:
+        if not isinstance(data, dict):
+            self._invalid(bus, drive, None, None, 'a command is a JSON object like {"id": 1, …}')
+            return
+        command_id = data.get("id")
+        raw_action = data.get("action")
+        action = raw_action if isinstance(raw_action, str) else None
+        if "id" not in data:
+            self._invalid(bus, drive, None, action, "'id' is missing: the result carries it")
+            return
+        if isinstance(command_id, bool) or not isinstance(command_id, str | int):
+            self._invalid(bus, drive, command_id, action, "'id' must be a string or an integer")
+            return
+        plan = self._gateway.drive_plan(drive)
+        if plan is None or self._gateway.fleet.get(bus, drive) is None:
+            self._invalid(bus, drive, command_id, action, f"no drive {drive!r} on bus {bus!r}")
+            return
+        try:
+            command = parse_command(data, plan, actor=self.actor)
+        except UsageError as exc:
+            self._invalid(bus, drive, command_id, action, str(exc))
+            return
+        task = asyncio.create_task(
+            self._execute(bus, drive, command_id, command), name=f"mqtt.command[{bus}/{drive}]"
+        )
+        self.running.add(task)
+        task.add_done_callback(self.running.discard)
+
+    async def _execute(self, bus: str, drive: str, command_id: Any, command: Command) -> None:
+        action = command.action.value
+        try:
+            result = await self._gateway.execute(drive, command)
+        except asyncio.CancelledError:
+            reason = "the MQTT bridge stopped before the command ended"
+            self._answer(bus, drive, command_id, action, _result(Outcome.CANCELLED, reason))
+            raise
+        except Exception as exc:  # one result, always, even when something below is broken
+            log.exception("mqtt.command_failed", bus=bus, drive=drive, command=action)
+            result = _result(Outcome.CANCELLED, f"internal error: {exc}")
+        self._answer(bus, drive, command_id, action, result)
+
+    def _invalid(
+        self, bus: str, drive: str, command_id: Any, action: str | None, reason: str
+    ) -> None:
+        log.info(
+            "command.completed",
+            actor=self.actor,
+            bus=bus,
+            drive=drive,
+            command=action or "-",
+            command_id=command_id,
+            outcome=Outcome.INVALID.value,
+            reason=reason,
+        )
+        self._answer(bus, drive, command_id, action, _result(Outcome.INVALID, reason))
+
+    def _answer(
+        self, bus: str, drive: str, command_id: Any, action: str | None, result: CommandResult
+    ) -> None:
+        payload = result_payload(command_id, bus, drive, action, result)
+        self._outbox.result(self._topics.result(bus, drive), payload)
+
+
+def _result(outcome: Outcome, reason: str) -> CommandResult:
+    return CommandResult(outcome=outcome, reason=reason)
