@@ -125,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     decode = commands.add_parser(
         "decode",
         help="explain a captured frame field by field",
-        description="Decode a captured frame. FRAME is hex bytes; spaces are optional.",
+        description="Decode a captured frame. FRAME is hex bytes (spaces optional), or for the "
+        "ASCII protocols the characters with control codes written <ENQ>, <STX>, <CR>, ….",
     )
     decode.add_argument("--protocol", choices=PROTOCOLS, default="danfoss-fc")
     decode.add_argument(

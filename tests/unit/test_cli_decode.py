@@ -149,3 +149,29 @@ def test_hex_bytes_may_carry_0x_prefixes() -> None:
     from fcmaster.commands.frames import parse_hex
 
     assert parse_hex("0x02 0x06,0x81:04 7C") == bytes([0x02, 0x06, 0x81, 0x04, 0x7C])
+
+
+def test_mitsubishi_frames_decode_from_ascii_with_control_names(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # The manual's worked example: sum of "01E1107AD" = 0x1F4 → "F4" (protocols/mitsubishi.md §4)
+    code = main(["decode", "--protocol", "mitsubishi", "--json", "<ENQ>01E1107ADF4"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert (out["frame"], out["station"], out["instruction"], out["sum_ok"]) == (
+        "request",
+        1,
+        "E1",
+        True,
+    )
+
+
+def test_enc_frames_decode_and_a_wrong_checksum_exits_1(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # ~010C00050FA00280: forward run at 40.00 Hz, checksum 0x280 (protocols/enc.md §4.2)
+    assert main(["decode", "--protocol", "enc", "--json", "~010C00050FA00280<CR>"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out["address"], out["command"], out["cmd_index"], out["data"]) == (1, 12, 5, 4000)
+    assert main(["decode", "--protocol", "enc", "--json", "~010C00050FA00281<CR>"]) == 1
+    assert json.loads(capsys.readouterr().out)["checksum_ok"] is False
