@@ -56,3 +56,43 @@ class Framer(Protocol):
     @property
     def buffered(self) -> int:
         """Number of bytes fed but not yet handed out."""
+
+
+class FramerBuffer:
+    """The bookkeeping every vendor framer shares: received bytes and the last gap.
+
+    A vendor framer subclasses this and writes only :meth:`next_frame`, cutting what it
+    recognises off the head of ``_buf`` with :meth:`_take` or :meth:`_skip`. ``_horizon``
+    is the number of buffered bytes that arrived before the last :meth:`reset` (0: no gap
+    since): a candidate frame that starts before it must also end before it.
+    """
+
+    __slots__ = ("_buf", "_horizon")
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self._horizon = 0
+
+    def feed(self, data: bytes) -> None:
+        """Append received bytes."""
+        self._buf += data
+
+    @property
+    def buffered(self) -> int:
+        """Bytes fed but not yet handed out."""
+        return len(self._buf)
+
+    def reset(self) -> None:
+        """Mark an inter-character gap: a frame begun before it may not wait for more bytes."""
+        self._horizon = len(self._buf)
+
+    def _take(self, count: int) -> bytes:
+        """Cut ``count`` bytes off the head of the buffer."""
+        data = bytes(self._buf[:count])
+        del self._buf[:count]
+        self._horizon = max(0, self._horizon - count)
+        return data
+
+    def _skip(self, count: int, reason: SkipReason) -> Skipped:
+        """Cut ``count`` bytes off the head as a skipped piece."""
+        return Skipped(self._take(count), reason)

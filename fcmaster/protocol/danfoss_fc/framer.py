@@ -14,33 +14,19 @@ of a later telegram, whether those bytes are fed before or after the next call.
 from __future__ import annotations
 
 from fcmaster.protocol.danfoss_fc.telegram import LGE_PROCESS, LGE_TEXT_BASE, STX, bcc
-from fcmaster.protocol.framing import Frame, Skipped, SkipReason
+from fcmaster.protocol.framing import Frame, FramerBuffer, Skipped, SkipReason
 
 DEFAULT_MAX_TEXT_LENGTH = 64  # drive identification texts (15-4x) are at most 40 characters
 
 
-class FcFramer:
+class FcFramer(FramerBuffer):
     """Incremental framer for FC telegrams; fed any chunks, it never raises."""
 
-    __slots__ = ("_buf", "_horizon", "_max_lge")
+    __slots__ = ("_max_lge",)
 
     def __init__(self, *, max_text_length: int = DEFAULT_MAX_TEXT_LENGTH) -> None:
-        self._buf = bytearray()
-        self._horizon = 0  # bytes before this index arrived before the last gap
+        super().__init__()
         self._max_lge = min(LGE_TEXT_BASE + max_text_length, 0xFF)
-
-    def feed(self, data: bytes) -> None:
-        """Append received bytes."""
-        self._buf += data
-
-    @property
-    def buffered(self) -> int:
-        """Bytes fed but not yet handed out."""
-        return len(self._buf)
-
-    def reset(self) -> None:
-        """Mark a gap: candidates begun before it may no longer wait for more bytes."""
-        self._horizon = len(self._buf)
 
     def next_frame(self) -> Frame | Skipped | None:
         """Return the next checked frame or skipped piece, or None if more bytes are needed."""
@@ -63,15 +49,6 @@ class FcFramer:
         total = lge + 2
         if end < total:
             return self._skip(1, SkipReason.GAP) if self._horizon else None
-        frame = bytes(buf[:total])
-        if bcc(frame) != 0:
+        if bcc(memoryview(buf)[:total]) != 0:
             return self._skip(1, SkipReason.CHECKSUM)
-        del buf[:total]
-        self._horizon = max(0, self._horizon - total)
-        return Frame(frame)
-
-    def _skip(self, count: int, reason: SkipReason) -> Skipped:
-        data = bytes(self._buf[:count])
-        del self._buf[:count]
-        self._horizon = max(0, self._horizon - count)
-        return Skipped(data, reason)
+        return Frame(self._take(total))

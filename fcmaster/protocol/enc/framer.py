@@ -34,30 +34,13 @@ from fcmaster.protocol.enc.frame import (
     MIN_LENGTH,
     checksum,
 )
-from fcmaster.protocol.framing import Frame, Skipped, SkipReason
+from fcmaster.protocol.framing import Frame, FramerBuffer, Skipped, SkipReason
 
 
-class EncFramer:
+class EncFramer(FramerBuffer):
     """Incremental framer for ENC frames in either direction; fed any chunks, it never raises."""
 
-    __slots__ = ("_buf", "_horizon")
-
-    def __init__(self) -> None:
-        self._buf = bytearray()
-        self._horizon = 0  # bytes before this index arrived before the last gap
-
-    def feed(self, data: bytes) -> None:
-        """Append received bytes."""
-        self._buf += data
-
-    @property
-    def buffered(self) -> int:
-        """Bytes fed but not yet handed out."""
-        return len(self._buf)
-
-    def reset(self) -> None:
-        """Mark a gap: a candidate begun before it may no longer wait for more bytes."""
-        self._horizon = len(self._buf)
+    __slots__ = ()
 
     def next_frame(self) -> Frame | Skipped | None:
         """Return the next checked frame or skipped piece, or None if more bytes are needed."""
@@ -93,12 +76,3 @@ class EncFramer:
         if int(sent, 16) != checksum(body):
             return self._skip(length, SkipReason.CHECKSUM)
         return Frame(self._take(length))
-
-    def _skip(self, count: int, reason: SkipReason) -> Skipped:
-        return Skipped(self._take(count), reason)
-
-    def _take(self, count: int) -> bytes:
-        data = bytes(self._buf[:count])
-        del self._buf[:count]
-        self._horizon = max(0, self._horizon - count)
-        return data

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from typing import Final
 
-from fcmaster.protocol.framing import Frame, Skipped, SkipReason
+from fcmaster.protocol.framing import Frame, FramerBuffer, Skipped, SkipReason
 from fcmaster.protocol.mitsubishi.message import (
     ACK,
     CR,
@@ -52,10 +52,10 @@ _MULTI_COMMAND: Final = 0xF0
 _Verdict = int | SkipReason | None
 
 
-class MitsubishiFramer:
+class MitsubishiFramer(FramerBuffer):
     """Incremental framer for computer-link frames; fed any chunks, it never raises."""
 
-    __slots__ = ("_buf", "_from_drive", "_horizon", "_starts", "_terminator", "_wait_digit")
+    __slots__ = ("_from_drive", "_starts", "_terminator", "_wait_digit")
 
     def __init__(
         self,
@@ -64,25 +64,11 @@ class MitsubishiFramer:
         from_drive: bool = True,
         wait_digit: bool = True,
     ) -> None:
-        self._buf = bytearray()
-        self._horizon = 0  # bytes before this index arrived before the last gap
+        super().__init__()
         self._terminator = terminator
         self._from_drive = from_drive
         self._wait_digit = wait_digit  # requests only: Pr.123 = 9999
         self._starts = (STX, ACK, NAK) if from_drive else (ENQ, ACK, NAK)
-
-    def feed(self, data: bytes) -> None:
-        """Append received bytes."""
-        self._buf += data
-
-    @property
-    def buffered(self) -> int:
-        """Bytes fed but not yet handed out."""
-        return len(self._buf)
-
-    def reset(self) -> None:
-        """Mark a gap: candidates begun before it may no longer wait for more bytes."""
-        self._horizon = len(self._buf)
 
     def next_frame(self) -> Frame | Skipped | None:
         """Return the next checked frame or skipped piece, or None if more bytes are needed."""
@@ -109,9 +95,7 @@ class MitsubishiFramer:
             return self._skip(1, SkipReason.GAP) if at_gap else None
         if isinstance(verdict, SkipReason):
             return self._skip(1, verdict)
-        frame = bytes(buf[:verdict])
-        del buf[:verdict]
-        self._horizon = max(0, self._horizon - verdict)
+        frame = self._take(verdict)
         return Frame(frame)
 
     def _judge_fixed(self, length: int, end: int, at_gap: bool) -> _Verdict:
@@ -199,9 +183,3 @@ class MitsubishiFramer:
 
     def _hex_run(self, start: int, stop: int) -> bool:
         return HEX_DIGITS.issuperset(self._buf[start:stop])
-
-    def _skip(self, count: int, reason: SkipReason) -> Skipped:
-        data = bytes(self._buf[:count])
-        del self._buf[:count]
-        self._horizon = max(0, self._horizon - count)
-        return Skipped(data, reason)
