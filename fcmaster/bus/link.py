@@ -46,6 +46,8 @@ class Link:
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
         self.written_at = 0.0  # when the last request was written
         self.ready_at = 0.0  # when the next request may go (pause, drain or broadcast wait)
+        self.replied_at = 0.0  # when the last byte of the last reply arrived
+        self._arrived = 0.0
         self._framer = codec.new_framer()
         self._replied_at: float | None = None
 
@@ -82,17 +84,19 @@ class Link:
         written_at = self.written_at
         deadline = written_at + plan.reply_timeout(len(exchange.request), exchange.reply_length)
         reply = await self._read_until(exchange, deadline)
-        now = clock.now()
         if reply is None:
             stats.timeouts += 1
             self._record("timeout", b"")
             # Let a late reply finish arriving, so it is discarded, not misattributed.
-            self.ready_at = now + plan.wire_s(exchange.reply_length) + plan.gap_s
+            self.ready_at = clock.now() + plan.wire_s(exchange.reply_length) + plan.gap_s
         else:
+            # The pause runs from the reply's arrival, so decoding it, the planner's update
+            # and the next request's encoding all happen inside the pause.
+            arrived = self.replied_at = self._arrived
             stats.replies += 1
-            stats.latency.observe(now - written_at)
-            self._replied_at = now
-            self.ready_at = now + self.pause_s
+            stats.latency.observe(arrived - written_at)
+            self._replied_at = arrived
+            self.ready_at = arrived + self.pause_s
         stats.busy_s += self.ready_at - written_at
         return reply
 
@@ -118,7 +122,7 @@ class Link:
                 if reply is not None or read_deadline >= deadline:
                     return reply
                 continue
-            last_rx = clock.now()
+            last_rx = self._arrived = clock.now()
             framer.feed(chunk)
             reply = self._drain(exchange)
             if reply is not None:

@@ -271,6 +271,7 @@ class BusMaster:
                 self._count_failure(step)
                 self._handle(planner.on_failure(step, now, self._timeout_reason(step)))
                 continue
+            now = link.replied_at
             self._count_reply(step, reply, now - link.written_at)
             self._handle(planner.on_reply(step, reply, now))
             slot = step.slot
