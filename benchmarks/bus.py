@@ -42,9 +42,9 @@ one clock for both processes):
   timer lateness (reply due → sent), reply sent → the master's read returned (pty, the
   master's wake-up) and the master's overhead; the four add up to the loss. The overhead is
   split in turn at the master's pause, whose ``sleep_until`` calls a recording clock notes
-  (the injected Clock seam; the master's code is unchanged): read returned → pause begins
-  (the decode, which the master does before it starts counting the pause), the pause's
-  wake-up lateness, and wake-up → write.
+  (the injected Clock seam; the master's code is unchanged): read returned → the start the
+  master counts its pause from ("decode": above zero when it decodes before it starts
+  counting), the pause's wake-up lateness, and wake-up → write.
 
 The epoll runs reset the thread's timer slack to the default first (the precise loop
 lowers it, and the setting would otherwise carry over).
@@ -675,7 +675,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print("Where the time goes, mean µs per transaction: cycle - T = request written → heard by")
     print("the simulator + its timer's lateness + reply sent → master's read returned + the")
-    print("master's overhead; which = read → pause begins (decode) + the pause's wake-up")
+    print("master's overhead; which = read → pause counted from (decode) + the pause's wake-up")
     print("lateness + wake → next write; 'over': turnarounds that outlasted the pause. CPU µs")
     print("per transaction (user, system), voluntary sleeps and preemptions per transaction,")
     print("the simulator process's CPU share:")
@@ -693,7 +693,7 @@ def main(argv: list[str] | None = None) -> int:
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "fcmaster_commit": _git("rev-parse", "--short", "HEAD"),
-        "fcmaster_uncommitted": _git("status", "--porcelain", "--", "fcmaster").splitlines(),
+        "fcmaster_uncommitted": _git("status", "--porcelain", "--", ":/fcmaster").splitlines(),
         "cpus": os.cpu_count(),
         "duration_s": duration_s,
         "warmup_s": WARMUP_S,
