@@ -106,6 +106,11 @@ def build_parser() -> argparse.ArgumentParser:
         "sim", help="serve simulated drives on a pseudo-terminal",
         description="Serve simulated drives on a pty; prints 'BUS PATH', runs until SIGINT/TERM.",
     )  # fmt: skip
+    sim.add_argument(
+        "--config",
+        type=Path,
+        help="simulate the drives of this config's buses; link each bus's port path to its pty",
+    )
     sim.add_argument("--protocol", choices=PROTOCOLS, default="danfoss-fc")
     sim.add_argument("--addresses", type=_addresses, default=[1], help="e.g. 1-8 (default 1)")
     sim.add_argument("--baudrate", type=int, default=19200)

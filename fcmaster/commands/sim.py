@@ -14,11 +14,14 @@ import signal
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TextIO
 
 from fcmaster.clock import Clock, MonotonicClock
+from fcmaster.config import load
 from fcmaster.errors import UsageError
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line, parse_faults
+from fcmaster.sim.service import sim_settings
 
 
 @dataclass(slots=True, frozen=True)
@@ -31,7 +34,9 @@ class SimBus:
 
 
 async def run(args: argparse.Namespace) -> int:
-    """Serve the one line the command-line options describe."""
+    """Serve the buses of ``--config``, or the one line the other options describe."""
+    if args.config is not None:
+        return await serve(config_buses(args.config))
     delay_ms = args.response_delay_ms
     line = LineSettings(
         name=args.name,
@@ -43,6 +48,26 @@ async def run(args: argparse.Namespace) -> int:
     )
     drive = DriveSettings(response_delay_s=None if delay_ms is None else delay_ms / 1000.0)
     return await serve([SimBus(line, [(address, drive) for address in args.addresses], args.link)])
+
+
+def config_buses(path: Path) -> list[SimBus]:
+    """Every bus of the config at ``path`` whose port is a device path, linked to its pty.
+
+    ``sim://`` buses are left out: the daemon serves those in-process itself.
+    """
+    config = load(path)
+    buses = []
+    for plan in config.lines:
+        if plan.port.startswith("sim://"):
+            continue
+        if "://" in plan.port:
+            raise UsageError(f"bus {plan.name}: {plan.port} is not a device path to link a pty at")
+        model = next(b for b in config.model.buses if b.name == plan.name)
+        settings, drives = sim_settings(plan, model.simulation or {})
+        buses.append(SimBus(settings, drives, link=plan.port))
+    if not buses:
+        raise UsageError(f"{path} has no bus with a device path to simulate")
+    return buses
 
 
 async def serve(

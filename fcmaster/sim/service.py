@@ -52,6 +52,17 @@ def sim_transport(plan: LinePlan, simulation: Mapping[str, Any], *, clock: Clock
 
 def sim_line(plan: LinePlan, simulation: Mapping[str, Any], *, clock: Clock) -> SimLine:
     """The simulated line for ``plan``, powered up now; ConfigError for a bad section."""
+    line, drives = sim_settings(plan, simulation)
+    try:
+        return build_line(line, drives, clock=clock)
+    except FcmasterError as exc:
+        raise ConfigError([(f"buses.{plan.name}.simulation", str(exc))]) from exc
+
+
+def sim_settings(
+    plan: LinePlan, simulation: Mapping[str, Any]
+) -> tuple[LineSettings, list[tuple[int, DriveSettings]]]:
+    """The simulator's settings for ``plan`` and its ``simulation:`` section."""
     where = f"buses.{plan.name}.simulation"
     _check_keys(simulation, _LINE_KEYS, where)
     faults = _faults(simulation.get("faults"), f"{where}.faults")
@@ -73,10 +84,7 @@ def sim_line(plan: LinePlan, simulation: Mapping[str, Any], *, clock: Clock) -> 
         name=plan.name, protocol=plan.protocol, baudrate=plan.baudrate, parity=plan.parity,
         stopbits=plan.stopbits, databits=plan.databits, faults=faults,
     )  # fmt: skip
-    try:
-        return build_line(line, drives, clock=clock)
-    except FcmasterError as exc:
-        raise ConfigError([(where, str(exc))]) from exc
+    return line, drives
 
 
 def _drive(
