@@ -14,7 +14,9 @@ from hypothesis import strategies as st
 
 from fcmaster.protocol.danfoss_fc import FcFramer, encode_telegram
 from fcmaster.protocol.framing import Frame, Skipped, SkipReason
+from tests.unit.protocol import framer_laws as laws
 from tests.unit.protocol.danfoss_fc.strategies import directed_telegrams, telegrams, xor_all
+from tests.unit.protocol.framer_laws import covered, drain, frames
 
 # 02^06=04 ^81=85 ^04=81 ^7C=FD ^20=DD ^00=DD
 START_1 = bytes.fromhex("02 06 81 04 7C 20 00 DD")
@@ -22,32 +24,6 @@ START_1 = bytes.fromhex("02 06 81 04 7C 20 00 DD")
 STOP_22 = bytes.fromhex("02 06 16 04 3C 00 00 2A")
 # 02^0E=0C ^81=8D ^11=9C ^55=C9, zeros: C9
 READ_3_41 = bytes.fromhex("02 0E 81 11 55 00 00 00 00 00 00 00 00 00 00 C9")
-
-Piece = Frame | Skipped
-
-
-def drain(framer: FcFramer) -> list[Piece]:
-    pieces: list[Piece] = []
-    while (piece := framer.next_frame()) is not None:
-        pieces.append(piece)
-    return pieces
-
-
-def feed_all(framer: FcFramer, chunks: list[bytes]) -> list[Piece]:
-    pieces: list[Piece] = []
-    for chunk in chunks:
-        framer.feed(chunk)
-        pieces += drain(framer)
-    return pieces
-
-
-def frames(pieces: list[Piece]) -> list[bytes]:
-    return [piece.data for piece in pieces if isinstance(piece, Frame)]
-
-
-def covered(pieces: list[Piece]) -> bytes:
-    return b"".join(piece.data for piece in pieces)
-
 
 # ---------------------------------------------------------------- hand-made streams
 
@@ -205,100 +181,45 @@ fragments = st.one_of(
     st.sampled_from([b"\x02", b"\x02\x06", b"\x02\x0e", b"\x02\x4a", b"\x02\x4b", b"\x02\xff"]),
 )
 streams = st.binary(max_size=400) | st.lists(fragments, max_size=20).map(b"".join)
+wires = directed_telegrams(max_text_length=64).map(lambda case: encode_telegram(case[0]))
+NO_STX = st.binary(max_size=40).map(lambda noise: noise.replace(b"\x02", b""))
 
 
-def check_pieces(pieces: list[Piece]) -> None:
-    for piece in pieces:
-        assert piece.data, "an empty piece"
-        if isinstance(piece, Frame):
-            assert piece.data[0] == 0x02
-            assert len(piece.data) == piece.data[1] + 2
-            assert xor_all(piece.data) == 0
-
-
-def assert_covers(framer: FcFramer, pieces: list[Piece], fed: bytes) -> None:
-    check_pieces(pieces)
-    assert covered(pieces) == fed[: len(fed) - framer.buffered]
-    # A drained framer holds at most one unfinished candidate, which starts with STX.
-    assert framer.buffered <= 10 + 64 + 1
-    if framer.buffered:
-        assert fed[len(fed) - framer.buffered] == 0x02
-
-
-def assert_reset_hands_out_the_rest(framer: FcFramer, pieces: list[Piece], fed: bytes) -> None:
-    framer.reset()
-    pieces = pieces + drain(framer)
-    check_pieces(pieces)
-    assert covered(pieces) == fed
-    assert framer.buffered == 0
-
-
-@given(streams)
-@settings(max_examples=300)
-def test_any_bytes_fed_whole_are_covered_exactly_once(stream: bytes) -> None:
-    framer = FcFramer()
-    pieces = feed_all(framer, [stream])
-    assert_covers(framer, pieces, stream)
-    assert_reset_hands_out_the_rest(framer, pieces, stream)
-
-
-@given(streams)
-@settings(max_examples=150, deadline=None)
-def test_any_bytes_fed_one_at_a_time_are_covered_exactly_once(stream: bytes) -> None:
-    framer = FcFramer()
-    pieces = feed_all(framer, [stream[i : i + 1] for i in range(len(stream))])
-    assert_covers(framer, pieces, stream)
-    assert_reset_hands_out_the_rest(framer, pieces, stream)
+def check_telegram(data: bytes) -> None:
+    assert data[0] == 0x02
+    assert len(data) == data[1] + 2
+    assert xor_all(data) == 0
 
 
 @given(st.data(), streams)
-@settings(max_examples=300)
-def test_any_chunking_gives_the_same_pieces_as_feeding_whole(
-    data: st.DataObject, stream: bytes
-) -> None:
-    cuts = sorted(data.draw(st.sets(st.integers(0, len(stream)), max_size=12)))
-    chunks = [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)]
-    whole, chunked = FcFramer(), FcFramer()
-    whole_pieces = feed_all(whole, [stream])
-    chunked_pieces = feed_all(chunked, chunks)
-    assert_covers(chunked, chunked_pieces, stream)
-    # Without gaps, how the bytes arrived makes no difference to the frames found.
-    assert frames(chunked_pieces) == frames(whole_pieces)
-    assert_reset_hands_out_the_rest(chunked, chunked_pieces, stream)
+@settings(max_examples=300, deadline=None)
+def test_any_chunking_covers_every_byte_once(data: st.DataObject, stream: bytes) -> None:
+    laws.any_chunking_covers_every_byte_once(
+        FcFramer,
+        stream,
+        laws.some_cuts(data, stream),
+        check_telegram,
+        max_buffered=10 + 64 + 1,
+        heads=b"\x02",
+    )
 
 
 @given(st.lists(st.one_of(streams, st.just(None)), max_size=12))
 @settings(max_examples=300)
 def test_resets_anywhere_keep_the_coverage(steps: list[bytes | None]) -> None:
-    # None = the bus saw a gap: reset(); bytes = a read, fed then drained (or not).
-    framer = FcFramer()
-    pieces: list[Piece] = []
-    fed = b""
-    for step in steps:
-        if step is None:
-            framer.reset()
-        else:
-            framer.feed(step)
-            fed += step
-        pieces += drain(framer)
-        check_pieces(pieces)
-        assert covered(pieces) == fed[: len(fed) - framer.buffered]
-    assert_reset_hands_out_the_rest(framer, pieces, fed)
+    laws.resets_anywhere_keep_the_coverage(FcFramer, steps, check_telegram)
 
 
 @given(streams, st.integers(0, 245))
 @settings(max_examples=100)
 def test_the_text_limit_bounds_what_stays_buffered(stream: bytes, max_text: int) -> None:
     framer = FcFramer(max_text_length=max_text)
-    pieces = feed_all(framer, [stream])
-    assert covered(pieces) == stream[: len(stream) - framer.buffered]
+    pieces = laws.feed_all(framer, [stream])
+    assert laws.covered(pieces) == stream[: len(stream) - framer.buffered]
     assert framer.buffered <= min(10 + max_text, 255) + 1
 
 
 # ---------------------------------------------------------------- resync (hypothesis)
-
-NO_STX = st.binary(max_size=40).map(lambda noise: noise.replace(b"\x02", b""))
-wires = directed_telegrams(max_text_length=64).map(lambda case: encode_telegram(case[0]))
 
 
 @given(st.data(), st.lists(st.tuples(NO_STX, wires), min_size=1, max_size=8), NO_STX)
@@ -306,17 +227,9 @@ wires = directed_telegrams(max_text_length=64).map(lambda case: encode_telegram(
 def test_every_telegram_comes_out_between_noise_without_stx(
     data: st.DataObject, segments: list[tuple[bytes, bytes]], tail: bytes
 ) -> None:
-    # Noise with no STX byte cannot start a candidate, so nothing it holds can hide a telegram.
     stream = b"".join(noise + wire for noise, wire in segments) + tail
-    cuts = sorted(data.draw(st.sets(st.integers(0, len(stream)), max_size=10)))
-    chunks = [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)]
-    framer = FcFramer()
-    pieces = feed_all(framer, chunks)
-    assert frames(pieces) == [wire for _, wire in segments]
-    skipped = [piece for piece in pieces if isinstance(piece, Skipped)]
-    assert {piece.reason for piece in skipped} <= {SkipReason.NOISE}
-    assert b"".join(piece.data for piece in skipped) == b"".join(n for n, _ in segments) + tail
-    assert framer.buffered == 0
+    cuts = laws.some_cuts(data, stream, most=10)
+    laws.frames_between_clean_noise_all_come_out(FcFramer, segments, tail, cuts)
 
 
 @given(
@@ -331,47 +244,7 @@ def test_every_telegram_comes_out_between_noise_without_stx(
 def test_after_a_gap_every_telegram_comes_out_whatever_the_noise_before_it(
     data: st.DataObject, rounds: list[tuple[bytes, list[bytes]]]
 ) -> None:
-    # Each round: noise (STX and all), then a gap the bus measured (reset()), then telegrams.
-    # Noise may by chance hold a frame of its own, so the honest claim is about positions: no
-    # frame spans a gap, and from each gap on, the frames are exactly the telegrams sent.
-    framer = FcFramer()
-    pieces: list[Piece] = []
-    fed = b""
-    gaps: list[int] = []
-    expected: dict[int, bytes] = {}  # offset in the stream → telegram starting there
-    regions: list[range] = []  # offsets from each gap to the end of that round's telegrams
-    for noise, round_wires in rounds:
-        for part in (noise, None, *round_wires):
-            if part is None:
-                framer.reset()
-                gaps.append(len(fed))
-                continue
-            if part is not noise:
-                expected[len(fed)] = part
-            cut = data.draw(st.integers(0, len(part)))
-            for chunk in (part[:cut], part[cut:]):
-                framer.feed(chunk)
-                fed += chunk
-                if data.draw(st.booleans()):
-                    pieces += drain(framer)
-        regions.append(range(gaps[-1], len(fed)))
-    pieces += drain(framer)
-    assert covered(pieces) == fed
-    assert framer.buffered == 0
-
-    found: dict[int, bytes] = {}
-    offset = 0
-    for piece in pieces:
-        start, end = offset, offset + len(piece.data)
-        offset = end
-        if isinstance(piece, Frame):
-            assert not any(start < gap < end for gap in gaps), f"frame spans a gap: {piece}"
-            found[start] = piece.data
-    for start, wire in expected.items():
-        assert found.get(start) == wire, f"telegram at offset {start} lost"
-    for start, wire in found.items():
-        if any(start in region for region in regions):
-            assert start in expected, f"invented frame {wire.hex(' ')} at offset {start}"
+    laws.after_a_gap_every_frame_comes_out(FcFramer, data, rounds)
 
 
 def test_resync_example_by_hand() -> None:

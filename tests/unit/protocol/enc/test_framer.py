@@ -8,46 +8,20 @@ inter-character gap (``reset()``) is never completed with bytes from after it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fcmaster.protocol.enc import EncFramer, encode_request, encode_response
 from fcmaster.protocol.framing import Frame, Skipped, SkipReason
+from tests.unit.protocol import framer_laws as laws
 from tests.unit.protocol.enc.strategies import ascii_sum, close, requests, responses
+from tests.unit.protocol.framer_laws import covered, drain, frames
 
 STOP = b"~010C0007019B\r"  # §4.2, checksum worked out in test_frame.py
 READ_FREQUENCY = b"~010B00010194\r"  # §4.1
 FORWARD_40 = b"~010C00050FA00280\r"  # §3.1
 FRAME_ERROR = b"~011400C6\r"  # 30+31+31+34 = C6
-
-Piece = Frame | Skipped
-
-
-def drain(framer: EncFramer) -> list[Piece]:
-    pieces: list[Piece] = []
-    while (piece := framer.next_frame()) is not None:
-        pieces.append(piece)
-    return pieces
-
-
-def feed_all(framer: EncFramer, chunks: list[bytes]) -> list[Piece]:
-    pieces: list[Piece] = []
-    for chunk in chunks:
-        framer.feed(chunk)
-        pieces += drain(framer)
-    return pieces
-
-
-def frames(pieces: list[Piece]) -> list[bytes]:
-    return [piece.data for piece in pieces if isinstance(piece, Frame)]
-
-
-def covered(pieces: Sequence[Piece]) -> bytes:
-    return b"".join(piece.data for piece in pieces)
-
 
 # ---------------------------------------------------------------- hand-made streams
 
@@ -189,93 +163,33 @@ fragments = st.one_of(
     st.text(alphabet="0123456789ABCDEF~\r", max_size=20).map(str.encode),
 )
 streams = st.binary(max_size=400) | st.lists(fragments, max_size=20).map(b"".join)
+NO_HEAD = st.binary(max_size=40).map(lambda noise: noise.replace(b"~", b""))
 
 
-def check_pieces(pieces: list[Piece]) -> None:
-    for piece in pieces:
-        assert piece.data, "an empty piece"
-        if isinstance(piece, Frame):
-            data = piece.data
-            assert data[0] == ord("~")
-            assert data[-1] == ord("\r")
-            assert 10 <= len(data) <= 18
-            body = data[1:-5].decode("ascii")
-            assert data[-5:-1] == format(ascii_sum(body), "04X").encode()
-
-
-def assert_covers(framer: EncFramer, pieces: list[Piece], fed: bytes) -> None:
-    check_pieces(pieces)
-    assert covered(pieces) == fed[: len(fed) - framer.buffered]
-    # A drained framer holds at most one unfinished candidate, which starts with "~".
-    assert framer.buffered <= 17
-    if framer.buffered:
-        assert fed[len(fed) - framer.buffered] == ord("~")
-
-
-def assert_reset_hands_out_the_rest(framer: EncFramer, pieces: list[Piece], fed: bytes) -> None:
-    framer.reset()
-    pieces = pieces + drain(framer)
-    check_pieces(pieces)
-    assert covered(pieces) == fed
-    assert framer.buffered == 0
-
-
-@given(streams)
-@settings(max_examples=300)
-def test_any_bytes_fed_whole_are_covered_exactly_once(stream: bytes) -> None:
-    framer = EncFramer()
-    pieces = feed_all(framer, [stream])
-    assert_covers(framer, pieces, stream)
-    assert_reset_hands_out_the_rest(framer, pieces, stream)
-
-
-@given(streams)
-@settings(max_examples=150, deadline=None)
-def test_any_bytes_fed_one_at_a_time_are_covered_exactly_once(stream: bytes) -> None:
-    framer = EncFramer()
-    pieces = feed_all(framer, [stream[i : i + 1] for i in range(len(stream))])
-    assert_covers(framer, pieces, stream)
-    assert_reset_hands_out_the_rest(framer, pieces, stream)
+def check_frame(data: bytes) -> None:
+    assert data[0] == ord("~")
+    assert data[-1] == ord("\r")
+    assert 10 <= len(data) <= 18
+    body = data[1:-5].decode("ascii")
+    assert data[-5:-1] == format(ascii_sum(body), "04X").encode()
 
 
 @given(st.data(), streams)
-@settings(max_examples=300)
-def test_any_chunking_gives_the_same_pieces_as_feeding_whole(
-    data: st.DataObject, stream: bytes
-) -> None:
-    cuts = sorted(data.draw(st.sets(st.integers(0, len(stream)), max_size=12)))
-    chunks = [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)]
-    whole, chunked = EncFramer(), EncFramer()
-    whole_pieces = feed_all(whole, [stream])
-    chunked_pieces = feed_all(chunked, chunks)
-    assert_covers(chunked, chunked_pieces, stream)
-    # Without gaps, how the bytes arrived makes no difference to the frames found.
-    assert frames(chunked_pieces) == frames(whole_pieces)
-    assert_reset_hands_out_the_rest(chunked, chunked_pieces, stream)
+@settings(max_examples=300, deadline=None)
+def test_any_chunking_covers_every_byte_once(data: st.DataObject, stream: bytes) -> None:
+    cuts = laws.some_cuts(data, stream)
+    laws.any_chunking_covers_every_byte_once(
+        EncFramer, stream, cuts, check_frame, max_buffered=17, heads=b"~"
+    )
 
 
 @given(st.lists(st.one_of(streams, st.just(None)), max_size=12))
 @settings(max_examples=300)
 def test_resets_anywhere_keep_the_coverage(steps: list[bytes | None]) -> None:
-    # None = the bus saw a gap: reset(); bytes = a read, fed then drained.
-    framer = EncFramer()
-    pieces: list[Piece] = []
-    fed = b""
-    for step in steps:
-        if step is None:
-            framer.reset()
-        else:
-            framer.feed(step)
-            fed += step
-        pieces += drain(framer)
-        check_pieces(pieces)
-        assert covered(pieces) == fed[: len(fed) - framer.buffered]
-    assert_reset_hands_out_the_rest(framer, pieces, fed)
+    laws.resets_anywhere_keep_the_coverage(EncFramer, steps, check_frame)
 
 
 # ---------------------------------------------------------------- resync (hypothesis)
-
-NO_HEAD = st.binary(max_size=40).map(lambda noise: noise.replace(b"~", b""))
 
 
 @given(st.data(), st.lists(st.tuples(NO_HEAD, wires), min_size=1, max_size=8), NO_HEAD)
@@ -283,17 +197,9 @@ NO_HEAD = st.binary(max_size=40).map(lambda noise: noise.replace(b"~", b""))
 def test_every_frame_comes_out_between_noise_without_a_head(
     data: st.DataObject, segments: list[tuple[bytes, bytes]], tail: bytes
 ) -> None:
-    # Noise without "~" cannot start a candidate, so nothing it holds can hide a frame.
     stream = b"".join(noise + wire for noise, wire in segments) + tail
-    cuts = sorted(data.draw(st.sets(st.integers(0, len(stream)), max_size=10)))
-    chunks = [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)]
-    framer = EncFramer()
-    pieces = feed_all(framer, chunks)
-    assert frames(pieces) == [wire for _, wire in segments]
-    skipped = [piece for piece in pieces if isinstance(piece, Skipped)]
-    assert {piece.reason for piece in skipped} <= {SkipReason.NOISE}
-    assert covered(skipped) == b"".join(n for n, _ in segments) + tail
-    assert framer.buffered == 0
+    cuts = laws.some_cuts(data, stream, most=10)
+    laws.frames_between_clean_noise_all_come_out(EncFramer, segments, tail, cuts)
 
 
 @given(
@@ -308,48 +214,7 @@ def test_every_frame_comes_out_between_noise_without_a_head(
 def test_after_a_gap_every_frame_comes_out_whatever_the_noise_before_it(
     data: st.DataObject, rounds: list[tuple[bytes, list[bytes]]]
 ) -> None:
-    # Each round: noise ("~" and all), then a gap the bus measured (reset()), then frames.
-    # No frame spans a gap, and from each gap on, the frames are exactly the ones sent.
-    framer = EncFramer()
-    pieces: list[Piece] = []
-    fed = b""
-    gaps: list[int] = []
-    expected: dict[int, bytes] = {}
-    regions: list[range] = []
-    for noise, round_wires in rounds:
-        for part in (noise, None, *round_wires):
-            if part is None:
-                framer.reset()
-                gaps.append(len(fed))
-                continue
-            if part is not noise:
-                expected[len(fed)] = part
-            cut = data.draw(st.integers(0, len(part)))
-            for chunk in (part[:cut], part[cut:]):
-                framer.feed(chunk)
-                fed += chunk
-                if data.draw(st.booleans()):
-                    pieces += drain(framer)
-        regions.append(range(gaps[-1], len(fed)))
-    pieces += drain(framer)
-    framer.reset()
-    pieces += drain(framer)
-    assert covered(pieces) == fed
-    assert framer.buffered == 0
-
-    found: dict[int, bytes] = {}
-    offset = 0
-    for piece in pieces:
-        start, end = offset, offset + len(piece.data)
-        offset = end
-        if isinstance(piece, Frame):
-            assert not any(start < gap < end for gap in gaps), f"frame spans a gap: {piece}"
-            found[start] = piece.data
-    for start, wire in expected.items():
-        assert found.get(start) == wire, f"frame at offset {start} lost"
-    for start, wire in found.items():
-        if any(start in region for region in regions):
-            assert start in expected, f"invented frame {wire!r} at offset {start}"
+    laws.after_a_gap_every_frame_comes_out(EncFramer, data, rounds)
 
 
 def test_resync_example_by_hand() -> None:
