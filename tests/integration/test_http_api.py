@@ -11,10 +11,10 @@ from structlog.testing import capture_logs
 
 from fcmaster.bus.commands import Action, CommandResult, Outcome
 from fcmaster.protocol.codec import DriveError, ParameterKey, ParameterValue
+from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
     OPERATOR,
     VIEWER,
-    FakeGateway,
     serving,
 )
 

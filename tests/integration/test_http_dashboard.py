@@ -16,7 +16,8 @@ from playwright.async_api import Browser, ConsoleMessage, Page, async_playwright
 
 from fcmaster.bus.commands import Action
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from tests.integration.http_harness import OPERATOR_TOKEN, FakeGateway, http_model, serving
+from tests.integration.gateway_double import FakeGateway
+from tests.integration.http_harness import OPERATOR_TOKEN, http_model, serving
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [

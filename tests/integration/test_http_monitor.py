@@ -10,9 +10,9 @@ import pytest
 from fcmaster.cli import COMMANDS, build_parser
 from fcmaster.commands.monitor import Fleet, render_table, run, stream_url
 from fcmaster.errors import FcmasterError, UsageError
+from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
     VIEWER_TOKEN,
-    FakeGateway,
     free_port,
     http_model,
     serving,

@@ -12,10 +12,10 @@ from structlog.testing import capture_logs
 from fcmaster.adapters.http import HttpAdapter
 from fcmaster.bus.commands import Action, Command
 from fcmaster.errors import ConfigError
+from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
     OPERATOR,
     VIEWER,
-    FakeGateway,
     http_model,
     serving,
 )

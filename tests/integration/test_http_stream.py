@@ -13,11 +13,11 @@ from websockets.exceptions import InvalidStatus
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.state import CommandCompleted, LineChanged
+from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
     OPERATOR,
     OPERATOR_TOKEN,
     VIEWER,
-    FakeGateway,
     serving,
     ws_url,
 )

@@ -102,7 +102,7 @@ async def timed_out(drive: str, command: Command) -> CommandResult:
 async def test_refusals_and_timeouts_come_back_as_results(
     broker: Broker, handler: Any, outcome: str, error: Any
 ) -> None:
-    gateway = FakeGateway(handler=handler)
+    gateway = FakeGateway(respond=handler)
     async with (
         asyncio.timeout(LIMIT_S),
         Recorder(broker, "fcmaster/#") as client,
@@ -175,7 +175,7 @@ async def test_invalid_commands_get_one_invalid_result_and_never_reach_a_line(
 
 async def test_a_slow_read_does_not_hold_up_a_stop_for_another_drive(broker: Broker) -> None:
     gate = Gate()
-    gateway = FakeGateway(handler=gate)
+    gateway = FakeGateway(respond=gate)
     async with (
         asyncio.timeout(LIMIT_S),
         Recorder(broker, "fcmaster/#") as client,

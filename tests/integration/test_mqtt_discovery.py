@@ -46,7 +46,7 @@ async def test_each_drive_is_a_device_and_only_bus_drives_get_controls(broker: B
         await adapter.connected.wait()
         await ha.wait("homeassistant/number/fcmaster_line1_pump-1/reference_hz/config")
         await ha.wait("homeassistant/binary_sensor/fcmaster_line1_fan-2/warning/config")
-        gateway.reply("pump-1", frequency_hz=20.0, value=("16-14", 3.2, "A"))
+        gateway.reply("pump-1", hz=20.0, value=("16-14", 3.2, "A"))
         current = await ha.wait_json("homeassistant/sensor/+/value_16-14/config")
 
         pump, fan = entities(ha, PUMP), entities(ha, FAN)

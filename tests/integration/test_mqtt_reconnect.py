@@ -66,7 +66,7 @@ async def test_no_command_is_left_without_a_result_across_a_broker_restart(
     broker = Broker(tmp_path, persistence=True)  # keeps the client's session across a restart
     await broker.start()
     gate = Gate()
-    gateway = FakeGateway(handler=gate)
+    gateway = FakeGateway(respond=gate)
     results = "fcmaster/+/+/command/result"
     try:
         async with asyncio.timeout(LIMIT_S):

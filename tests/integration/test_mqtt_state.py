@@ -11,7 +11,6 @@ import pytest
 
 from fcmaster.adapters.mqtt import MqttAdapter
 from fcmaster.config import MqttModel, parse
-from fcmaster.protocol.codec import Condition
 from fcmaster.service import Service
 from tests.integration.mosquitto import Broker, Recorder, payload_text
 from tests.integration.mqtt_gateway import FakeGateway
@@ -102,7 +101,7 @@ async def test_state_goes_out_on_significant_change_only_and_on_the_heartbeat(
     broker: Broker,
 ) -> None:
     gateway = FakeGateway()
-    gateway.reply("pump-1", frequency_hz=10.0, value=("16-14", 4.0, "A"))
+    gateway.reply("pump-1", hz=10.0, value=("16-14", 4.0, "A"))
     topic = "fcmaster/line1/pump-1/state"
     async with asyncio.timeout(LIMIT_S), Recorder(broker, topic) as watcher:
         adapter = MqttAdapter(model(broker, deadband_pct=5.0, heartbeat_s=3600), gateway)
@@ -116,7 +115,7 @@ async def test_state_goes_out_on_significant_change_only_and_on_the_heartbeat(
                 (12.4, 4.3, False),  # 7 % of 4.3 A: sent
                 (12.4, 4.3, True),  # a discrete change: sent
             ]:
-                gateway.reply("pump-1", frequency_hz=frequency_hz, value=("16-14", current_a, "A"),
+                gateway.reply("pump-1", hz=frequency_hz, value=("16-14", current_a, "A"),
                               running=running)  # fmt: skip
                 await settle()
             state = await watcher.wait_json(topic, lambda s: s["running"], start=first)
@@ -144,7 +143,7 @@ async def test_alarm_and_availability_changes_are_events(broker: Broker) -> None
     ):
         await adapter.connected.wait()
         await watcher.wait(f"{base}/availability", lambda m: payload_text(m) == "online")
-        gateway.reply("fan-2", alarms=(Condition(14, "Earth fault"),))
+        gateway.reply("fan-2", alarms=((14, "Earth fault"),))
         gateway.reply("fan-2", alarms=())
         gateway.offline("fan-2")
         await watcher.wait(f"{base}/availability", lambda m: payload_text(m) == "offline")
