@@ -47,6 +47,16 @@ def _line_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stopbits", type=int, choices=(1, 2))
     parser.add_argument("--address-format", type=int, choices=(31, 126), default=126)
     parser.add_argument("--timeout", type=float, help="reply deadline in seconds")
+    _encoding_options(parser)
+
+
+def _encoding_options(parser: argparse.ArgumentParser) -> None:
+    """enc: how the drives write addresses ≥ 10, response codes and fault codes."""
+    for what in ("address", "response", "fault"):
+        parser.add_argument(
+            f"--{what}-encoding", choices=("hex", "decimal"), default="hex",
+            help=f"enc: how the drives write {what} numbers (default hex)",
+        )  # fmt: skip
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -59,6 +69,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = commands.add_parser("run", help="run the daemon (the simulated demo fleet by default)")
     run.add_argument("--config", type=Path, help=f"default: {DEMO_CONFIG.name}, a simulated fleet")
+    run.add_argument(
+        "--http-listen",
+        metavar="HOST:PORT",
+        help="serve the HTTP API here instead of at the config's http.listen "
+        "(the demo's is 127.0.0.1:8080)",
+    )
 
     check = commands.add_parser("check", help="validate a config file")
     check.add_argument("--config", type=Path, required=True)
@@ -111,6 +127,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         help="simulate the drives of this config's buses; link each bus's port path to its pty",
     )
+    sim.add_argument(
+        "--bus",
+        action="append",
+        metavar="NAME",
+        help="with --config: only this bus (repeat for more; default: every device-path bus)",
+    )
     sim.add_argument("--protocol", choices=PROTOCOLS, default="danfoss-fc")
     sim.add_argument("--addresses", type=_addresses, default=[1], help="e.g. 1-8 (default 1)")
     sim.add_argument("--baudrate", type=int, default=19200)
@@ -120,6 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--link", help="also make this path a symbolic link to the pty")
     sim.add_argument("--faults", default="", help="e.g. drop=0.05,corrupt=0.01,late=0.01,echo")
     sim.add_argument("--response-delay-ms", type=float, help="every drive's 8-35 (default 10)")
+    _encoding_options(sim)
 
     monitor = commands.add_parser("monitor", help="a running daemon's fleet as a live table")
     monitor.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
@@ -162,13 +185,20 @@ def _options(args: argparse.Namespace) -> Any:
         stopbits=args.stopbits,
         address_format=args.address_format,
         timeout_s=args.timeout,
+        address_encoding=args.address_encoding,
+        response_encoding=args.response_encoding,
+        fault_encoding=args.fault_encoding,
     )
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from fcmaster.commands import daemon
 
-    return _run_async(daemon.run(args.config or DEMO_CONFIG, demo=args.config is None))
+    return _run_async(
+        daemon.run(
+            args.config or DEMO_CONFIG, demo=args.config is None, http_listen=args.http_listen
+        )
+    )
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
@@ -180,7 +210,8 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _cmd_scan(args: argparse.Namespace) -> int:
     from fcmaster.commands import commission
 
-    addresses = args.addresses or list(range(1, 127 if args.protocol != "mitsubishi" else 32))
+    every = range(0, 32) if args.protocol == "mitsubishi" else range(1, 127)  # stations 0-31
+    addresses = args.addresses or list(every)
     return _run_async(commission.scan(_options(args), addresses, as_json=args.json))
 
 

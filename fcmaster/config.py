@@ -15,6 +15,7 @@ dataclasses; nothing below ``service`` ever sees pydantic.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from dataclasses import dataclass
@@ -25,10 +26,12 @@ from urllib.parse import urlsplit
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.codecs import codec_for, response_delay_s
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.errors import ConfigError, UsageError
+from fcmaster.protocol.codec import DriveCodec
 
+_ENC_KEYS = ("address_encoding", "response_encoding", "fault_encoding")
 _ENV = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-([^}]*))?\}")
 
 
@@ -69,7 +72,14 @@ class BusModel(_Model):
     echo: bool = False
     rs485: bool = False
     terminator: Literal["none", "cr", "crlf"] = "cr"  # mitsubishi: as the drive's Pr.124
-    wait_time_ms: int | None = Field(default=None, ge=0, le=150)  # mitsubishi
+    # mitsubishi: the waiting-time digit every request carries (0-150 ms in 10 ms steps), or
+    # null when the drives' Pr.123 sets it and requests leave it out
+    wait_time_ms: int | None = Field(default=0, ge=0, le=150, multiple_of=10)
+    # enc: how the drives write addresses of 10 and above, response codes and fault codes
+    # (protocols/enc.md §10 questions 1, 2 and 7); replies are read in either encoding
+    address_encoding: Literal["hex", "decimal"] = "hex"
+    response_encoding: Literal["hex", "decimal"] = "hex"
+    fault_encoding: Literal["hex", "decimal"] = "hex"
     simulation: dict[str, Any] | None = None  # sim:// ports: what the simulated drives do
     drives: list[DriveModel] = Field(default_factory=list)
 
@@ -278,14 +288,13 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
             at = f"{where}.drives[{d}]"
             _unique(drive_names, drive.name, f"{at}.name", "drive name", problems)
             if drive.address not in codec.addresses:
-                problems.append(
-                    (f"{at}.address", f"{drive.address} is outside {_span(codec.addresses)}")
-                )
+                problems.append((f"{at}.address", _bad_address(bus, drive.address, codec)))
             else:
                 _unique(addresses, str(drive.address), f"{at}.address", "address", problems)
             for m, parameter in enumerate(drive.monitor or ()):
                 try:
-                    codec.parameter(parameter)
+                    # Named right, and readable by one poll (a Mitsubishi parameter is not).
+                    codec.poll_sequence((codec.parameter(parameter),))
                 except UsageError as exc:
                     problems.append((f"{at}.monitor[{m}]", str(exc)))
             max_hz = drive.max_frequency_hz or drive.nominal_frequency_hz
@@ -310,6 +319,12 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
             )
         if bus.protocol != "danfoss-fc" and "address_format" in bus.model_fields_set:
             problems.append((f"{where}.address_format", "only danfoss-fc lines have one"))
+        for key in _ENC_KEYS:
+            if bus.protocol != "enc" and key in bus.model_fields_set:
+                problems.append((f"{where}.{key}", "only enc lines have one"))
+        for key in ("terminator", "wait_time_ms"):
+            if bus.protocol != "mitsubishi" and key in bus.model_fields_set:
+                problems.append((f"{where}.{key}", "only mitsubishi lines have one"))
         lines.append(_line(bus, tuple(drives)))
     if model.mqtt is not None:  # names are topic levels: {base}/{bus}/{drive}/state
         for b, bus in enumerate(model.buses):
@@ -327,7 +342,7 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
 
 
 def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
-    return LinePlan(
+    plan = LinePlan(
         name=bus.name,
         port=bus.port,
         protocol=bus.protocol,
@@ -346,8 +361,17 @@ def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
         rs485=bus.rs485,
         terminator=bus.terminator,
         wait_time_ms=bus.wait_time_ms,
+        address_encoding=bus.address_encoding,
+        response_encoding=bus.response_encoding,
+        fault_encoding=bus.fault_encoding,
         drives=drives,
     )
+    protocol_delay_s = response_delay_s(plan)
+    if protocol_delay_s is not None and "response_delay_ms" not in bus.model_fields_set:
+        # The protocol says how long its drives may take (Mitsubishi: the waiting time plus
+        # the data check), and the reply deadline is derived from it.
+        plan = dataclasses.replace(plan, response_delay_s=protocol_delay_s)
+    return plan
 
 
 def _unique(
@@ -362,6 +386,17 @@ def _unique(
 def _topic_level(name: str, path: str, problems: list[tuple[str, str]]) -> None:
     if any(char in name for char in "/+#"):
         problems.append((path, f"{name!r} cannot be an MQTT topic level (no /, + or #)"))
+
+
+def _bad_address(bus: BusModel, address: int, codec: DriveCodec) -> str:
+    reason = f"{address} is outside {_span(codec.addresses)}"
+    if bus.protocol == "enc" and address in (0, 127):
+        # F2.15 allows 0-127, but fcmaster sends its broadcasts to 127 and means broadcast
+        # by address 0 between its layers, so neither can name one drive.
+        return f"{reason}: set the drive's F2.15 to another address (0 and 127 are broadcast)"
+    if bus.protocol == "enc" and bus.address_encoding == "decimal":
+        return f"{reason}: with address_encoding decimal an address has two decimal digits"
+    return reason
 
 
 def _span(addresses: range) -> str:

@@ -53,7 +53,13 @@ class LinePlan:
     echo: bool = False  # the adapter hears its own transmission
     rs485: bool = False  # kernel RS-485 mode (RTS drives the transmitter)
     terminator: str = "cr"  # mitsubishi: none | cr | crlf, as the drives' Pr.124
-    wait_time_ms: int | None = None  # mitsubishi: None = the waiting time travels in requests
+    # mitsubishi: the waiting time each request carries (drives at Pr.123 = 9999, the
+    # factory setting); None = requests leave it out because the drives' Pr.123 sets it
+    wait_time_ms: int | None = 0
+    # enc: how the drives write addresses ≥ 10, response codes and fault codes (hex | decimal)
+    address_encoding: str = "hex"
+    response_encoding: str = "hex"
+    fault_encoding: str = "hex"
     drives: tuple[DrivePlan, ...] = field(default=())
 
     @property

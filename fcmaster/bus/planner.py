@@ -27,6 +27,18 @@ been down (:meth:`Planner.on_line_down`), so a drive that comes back is never st
 the master on its own. A trip (status fault rising) turns the intent into a stop,
 so a later reset does not restart the motor; a new start is needed.
 
+A command may take several exchanges (a Mitsubishi run is a frequency write and a run
+command; its parameter access selects the parameter page first). They go one after the
+other; a refusal of any of them ends the command with that refusal, and otherwise the last
+one's reply is the command's result. A parameter access that fails part-way is retried from
+its first exchange, since what the earlier ones selected in the drive may be gone.
+
+A drive that restarts on a request (an exchange with ``deaf_s``: the Mitsubishi inverter
+reset) gets no reply to wait for and hears nothing for a while: the planner sends it
+nothing, polls included, until ``deaf_s`` has passed, while the other drives go on being
+served. Its output went off with the restart, so its commanded intent becomes a stop: a
+reset never restarts a motor.
+
 Every command ends exactly once, reported as a :class:`Completion`: the master resolves
 the caller's future from it. A stop supersedes motion commands of the same drive that are
 still queued (they end ``cancelled``); a newer reference coalesces into a queued one (both
@@ -85,6 +97,7 @@ class DriveSlot:
     running: bool | None = None  # as the last status said; None: not known yet
     reverse: bool = False
     output_pct: float | None = None  # the last output reported, in % of nominal
+    deaf_until: float = 0.0  # restarting (after an inverter reset): nothing goes to it before
 
     @property
     def name(self) -> str:
@@ -107,6 +120,8 @@ class Pending:
     attempts: int = 0
     part: int = 0  # which of the command's exchanges is next
     intent: ControlIntent | None = None  # the intent this command sends, once built
+    access: tuple[Exchange, ...] = ()  # a read's or write's exchanges, once built
+    learned: int = 0  # state-learning polls answered before a relative command
 
 
 @dataclass(slots=True, frozen=True)
@@ -166,6 +181,15 @@ class Planner:
             self._by_name[drive.name] = slot
         self._urgent: deque[Pending] = deque()
         self._normal: deque[Pending] = deque()
+        for slot in self.slots:
+            # Where a poll cannot carry the stop that on_start asks for (an ENC frame holds
+            # one command), the stop goes out on its own, ahead of everything.
+            if (
+                slot.intent is not None
+                and not codec.poll(slot.address, slot.intent, None).carries_control
+            ):
+                stop = Command(action=Action.STOP, actor="on_start")
+                self._urgent.append(Pending(stop, slot, []))
         self._next_poll = 0
         self._in_flight: Pending | None = None  # the command whose step is on the wire
         # how to take back the poll or probe last chosen: slot, round-robin position,
@@ -225,7 +249,8 @@ class Planner:
                 if reason:
                     return _result(Outcome.NOT_ALLOWED, reason)
             try:  # NaN, or beyond what the wire carries: it would fail in next_step instead
-                intent = ControlIntent(reference_pct=command.reference_pct)
+                # As a run: codecs that send the frequency only with a run (ENC) check it then.
+                intent = ControlIntent(Motion.RUN, reference_pct=command.reference_pct)
                 self.codec.control(0 if slot is None else slot.address, intent)
             except UsageError as exc:
                 return _result(Outcome.INVALID, str(exc))
@@ -315,11 +340,13 @@ class Planner:
 
     def next_step(self, now: float) -> Step | None:
         """The next exchange to carry out; None: nothing to do before :meth:`next_wakeup`."""
-        queue = self._urgent or self._normal
-        self._in_flight = queue[0] if queue else None
-        if queue:
-            return self._command_step(queue[0])
+        pending = self._next_command(now)
+        self._in_flight = pending
+        if pending is not None:
+            return self._command_step(pending)
         for slot in self.slots:
+            if slot.deaf_until > now:
+                continue
             if slot.online is False and slot.next_probe_at <= now:
                 self._undo = (slot, self._next_poll, slot.cursor, None, slot.next_probe_at)
                 slot.next_probe_at = now + self.plan.probe_interval_s
@@ -328,7 +355,7 @@ class Planner:
         count = len(self.slots)
         for offset in range(count):
             slot = self.slots[(self._next_poll + offset) % count]
-            if slot.online is not False:
+            if slot.online is not False and slot.deaf_until <= now:
                 urgent = slot.urgent_reads[0] if slot.urgent_reads else None
                 self._undo = (slot, self._next_poll, slot.cursor, urgent, slot.next_probe_at)
                 self._next_poll = (self._next_poll + offset + 1) % count
@@ -350,9 +377,27 @@ class Planner:
         self._undo = None
 
     def next_wakeup(self, now: float) -> float | None:
-        """When a probe falls due, if nothing else is to do; None: only a command wakes us."""
-        due = [s.next_probe_at for s in self.slots if s.online is False]
+        """When a probe falls due or a drive is heard again, if nothing else is to do.
+
+        None: only a command wakes us.
+        """
+        due = [
+            max(s.next_probe_at, s.deaf_until) if s.online is False else s.deaf_until
+            for s in self.slots
+            if s.online is False or s.deaf_until > now
+        ]
         return min(due) if due else None
+
+    def _next_command(self, now: float) -> Pending | None:
+        """The oldest urgent command, else the oldest other one, whose drive can hear it.
+
+        A command for a restarting drive waits, without holding up the other drives'.
+        """
+        for queue in (self._urgent, self._normal):
+            for pending in queue:
+                if all(target.deaf_until <= now for target in self._targets(pending.slot)):
+                    return pending
+        return None
 
     def _poll(self, slot: DriveSlot) -> Exchange:
         read: ParameterKey | None
@@ -375,8 +420,10 @@ class Planner:
                     or (command.action is Action.START and command.reference_pct is None)
                 )
             ):
-                # Learn what the drive is doing before changing part of it.
-                exchange = self.codec.poll(slot.address, None, None)
+                # Learn what the drive is doing before changing part of it: the status
+                # first, then (for protocols that report the output apart from the status,
+                # such as Mitsubishi) the items of the drive's monitor list in turn.
+                exchange = self.codec.poll(slot.address, None, _learning_read(slot, pending))
                 return Step(StepKind.COMMAND, exchange, slot, pending)
             if pending.intent is None:
                 base = ControlIntent() if slot is None else _current(slot)
@@ -389,10 +436,12 @@ class Planner:
             exchange = exchanges[pending.part]
         else:
             assert slot is not None  # access commands always name a drive
-            exchange = self._build_access(slot, command)
+            if not pending.access:
+                pending.access = self._build_access(slot, command)
+            exchange = pending.access[pending.part]
         return Step(StepKind.COMMAND, exchange, slot, pending)
 
-    def _build_access(self, slot: DriveSlot, command: Command) -> Exchange:
+    def _build_access(self, slot: DriveSlot, command: Command) -> tuple[Exchange, ...]:
         parameter = self.codec.parameter(command.parameter or "")
         if command.action is Action.READ:
             return self.codec.read(slot.address, parameter, command.index, slot.intent)
@@ -418,6 +467,10 @@ class Planner:
         self._in_flight = None
         if step.pending is not None:
             self._advance(step.pending, report, None)
+        deaf_s = step.exchange.deaf_s
+        if deaf_s > 0:
+            for target in self._targets(step.slot):
+                _restarted(target, now + deaf_s)
         return report
 
     def on_reply(self, step: Step, reply: Reply, now: float) -> Report:
@@ -441,6 +494,8 @@ class Planner:
         if step.kind is StepKind.COMMAND and step.pending is not None:
             pending = step.pending
             pending.attempts += 1
+            if pending.access:
+                pending.part = 0  # again from the start: what a first exchange selected may be gone
             if pending.attempts <= self.plan.retries:
                 return report  # stays at the head of its queue: retried next
             self._finish(pending, report, _result(Outcome.TIMEOUT, reason))
@@ -512,7 +567,24 @@ class Planner:
             return
         if command.action.is_control:
             if pending.intent is None:
-                pending.attempts = 0  # that was the state-learning poll; now the command
+                pending.attempts = 0  # that was a state-learning poll; now the command
+                pending.learned += 1
+                slot = pending.slot
+                if (
+                    slot is not None
+                    and slot.intent is None
+                    and pending.learned > len(slot.sequence) + 1
+                ):
+                    # A whole rotation answered and still not adoptable: do not poll forever.
+                    self._finish(
+                        pending,
+                        report,
+                        _result(
+                            Outcome.TIMEOUT,
+                            f"{slot.name}'s state could not be learned (running, but no "
+                            "output reported)",
+                        ),
+                    )
                 return
             slot = pending.slot
             pending.part += 1
@@ -535,16 +607,23 @@ class Planner:
                 return
             self._finish(pending, report, _result(Outcome.DONE, ""))
             return
+        pending.part += 1
+        if pending.part < len(pending.access):
+            # attempts are not reset: a failure starts the access over from its first
+            # exchange, so the command's retries must bound the whole sequence
+            return
         value = None if reply is None else reply.value
         self._finish(pending, report, CommandResult(outcome=Outcome.DONE, value=value))
 
     def _finish(self, pending: Pending, report: Report, result: CommandResult) -> None:
+        # Usually the head of its queue; a command behind one for a restarting drive may
+        # have been served first.
         for queue in (self._urgent, self._normal):
-            if queue and queue[0] is pending:
-                queue.popleft()
+            if pending in queue:
+                queue.remove(pending)
                 break
-        else:  # pragma: no cover - a step always serves the head of a queue
-            raise AssertionError("finished a command that was not at the head of its queue")
+        else:  # pragma: no cover - a step always serves a queued command
+            raise AssertionError("finished a command that was not queued")
         report.completions.append(_completion(pending, result))
 
 
@@ -553,6 +632,22 @@ def _forget(slot: DriveSlot) -> None:
     slot.running = slot.output_pct = None
     if slot.intent is not None and slot.intent.motion not in _STOPPING:
         slot.intent = None
+
+
+def _restarted(slot: DriveSlot, until: float) -> None:
+    """The drive restarts and hears nothing until ``until``; its output is off."""
+    slot.deaf_until = until
+    slot.running = slot.output_pct = None
+    if slot.intent is not None:
+        slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP, reset=False)
+
+
+def _learning_read(slot: DriveSlot, pending: Pending) -> ParameterKey | None:
+    """What the next state-learning poll reads besides the status (None: status only)."""
+    reads = [key for key in slot.sequence if key is not None]
+    if not pending.learned or not reads:
+        return None
+    return reads[(pending.learned - 1) % len(reads)]
 
 
 def _completion(pending: Pending, result: CommandResult) -> Completion:

@@ -13,7 +13,7 @@ import sys
 from dataclasses import dataclass, replace
 from typing import Any
 
-from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.codecs import codec_for, response_delay_s
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.link import Link
 from fcmaster.bus.plan import DrivePlan, LinePlan
@@ -43,11 +43,14 @@ class LineOptions:
     stopbits: int | None = None
     address_format: int = 126
     timeout_s: float | None = None
+    address_encoding: str = "hex"  # enc only, as the line's config keys
+    response_encoding: str = "hex"
+    fault_encoding: str = "hex"
 
     def plan(self, drives: tuple[DrivePlan, ...] = ()) -> LinePlan:
         """A line plan with the protocol's factory settings where nothing was given."""
         baudrate, parity, stopbits = FACTORY[self.protocol]
-        return LinePlan(
+        plan = LinePlan(
             name="cli",
             port=self.port,
             protocol=self.protocol,
@@ -56,9 +59,14 @@ class LineOptions:
             stopbits=self.stopbits or stopbits,
             address_format=self.address_format,
             timeout_s=self.timeout_s,
+            address_encoding=self.address_encoding,
+            response_encoding=self.response_encoding,
+            fault_encoding=self.fault_encoding,
             retries=1,
             drives=drives,
         )
+        delay_s = response_delay_s(plan)  # Mitsubishi: waiting time and data check time
+        return plan if delay_s is None else replace(plan, response_delay_s=delay_s)
 
 
 class _Session:
@@ -190,10 +198,16 @@ async def access(
         _check_address(codec, address)
         key = codec.parameter(parameter)
         if value is None:
-            exchange = codec.read(address, key, index, None)
+            exchanges = codec.read(address, key, index, None)
         else:
-            exchange = codec.write(address, key, index, _number(value), None, persist=persist)
-        reply = await session.link.transact(exchange)
+            exchanges = codec.write(address, key, index, _number(value), None, persist=persist)
+        # Several exchanges (a Mitsubishi parameter: the page, then the access): the first
+        # refusal or silence ends it; the last reply holds the value.
+        reply: Reply | None = None
+        for exchange in exchanges:
+            reply = await session.link.transact(exchange)
+            if reply is None or reply.error is not None:
+                break
     if reply is None:
         raise BusError(f"no reply from address {address} on {options.port}", address=address)
     if reply.error is not None:
@@ -271,7 +285,7 @@ async def control(
         if verb in (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE):
             print(
                 "note: fcmaster no longer feeds this drive's control-word watchdog; the drive "
-                "does what its timeout function (FC 8-03/8-04) says",
+                "does what its timeout function (FC 8-03/8-04, ENC F2.16, Mitsubishi Pr.122) says",
                 file=sys.stderr,
             )
         return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import structlog
@@ -10,6 +11,7 @@ from fcmaster import config as config_module
 from fcmaster import logsetup
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import LinePlan
+from fcmaster.errors import ConfigError, UsageError
 
 log = structlog.get_logger("fcmaster.cli")
 
@@ -60,12 +62,31 @@ def check(path: Path) -> int:
     return 0
 
 
-async def run(path: Path, *, demo: bool) -> int:
-    """Run the daemon until SIGTERM/SIGINT."""
+def with_http_listen(config: config_module.Config, listen: str) -> config_module.Config:
+    """``config`` with the HTTP API at ``listen`` (switched on if the file has no ``http``).
+
+    Everything else about the section (tokens, anonymous reads) stays as the file says, so
+    the safety rules still apply: with no tokens the address must be a loopback one.
+    """
+    from fcmaster.adapters.http import parse_listen
+
+    try:
+        parse_listen(listen)
+    except ConfigError as exc:
+        raise UsageError(f"--http-listen: {exc.problems[0][1]}") from None
+    http = config.model.http or config_module.HttpModel()
+    model = config.model.model_copy(update={"http": http.model_copy(update={"listen": listen})})
+    return dataclasses.replace(config, model=model)
+
+
+async def run(path: Path, *, demo: bool, http_listen: str | None = None) -> int:
+    """Run the daemon until SIGTERM/SIGINT (``http_listen`` overrides ``http.listen``)."""
     from fcmaster.service import Service
 
     config = config_module.load(path)
+    if http_listen is not None:
+        config = with_http_listen(config, http_listen)
     logsetup.configure(config.model.logging.level, config.model.logging.format)
-    log.info("config.loaded", path=str(path), demo=demo)
+    log.info("config.loaded", path=str(path), demo=demo, http_listen=http_listen)
     await Service(config, demo=demo).run()
     return 0

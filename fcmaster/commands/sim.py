@@ -36,7 +36,9 @@ class SimBus:
 async def run(args: argparse.Namespace) -> int:
     """Serve the buses of ``--config``, or the one line the other options describe."""
     if args.config is not None:
-        return await serve(config_buses(args.config))
+        return await serve(config_buses(args.config, only=args.bus))
+    if args.bus:
+        raise UsageError("--bus selects buses of a --config file; give --config too")
     delay_ms = args.response_delay_ms
     line = LineSettings(
         name=args.name,
@@ -45,20 +47,29 @@ async def run(args: argparse.Namespace) -> int:
         parity=args.parity,
         stopbits=args.stopbits,
         faults=parse_faults(args.faults),
+        address_encoding=args.address_encoding,
+        response_encoding=args.response_encoding,
+        fault_encoding=args.fault_encoding,
     )
     drive = DriveSettings(response_delay_s=None if delay_ms is None else delay_ms / 1000.0)
     return await serve([SimBus(line, [(address, drive) for address in args.addresses], args.link)])
 
 
-def config_buses(path: Path) -> list[SimBus]:
+def config_buses(path: Path, *, only: Sequence[str] | None = None) -> list[SimBus]:
     """Every bus of the config at ``path`` whose port is a device path, linked to its pty.
 
-    ``sim://`` buses are left out: the daemon serves those in-process itself.
+    ``sim://`` buses are left out: the daemon serves those in-process itself. ``only``
+    names the buses to serve (default: all of them), so one line can be served by a
+    process of its own and taken away (an unplugged adapter) while the others stay.
     """
     config = load(path)
+    if only:
+        unknown = sorted(set(only) - {plan.name for plan in config.lines})
+        if unknown:
+            raise UsageError(f"{path} has no bus called {', '.join(unknown)}")
     buses = []
     for plan in config.lines:
-        if plan.port.startswith("sim://"):
+        if plan.port.startswith("sim://") or (only and plan.name not in only):
             continue
         if "://" in plan.port:
             raise UsageError(f"bus {plan.name}: {plan.port} is not a device path to link a pty at")
@@ -66,7 +77,8 @@ def config_buses(path: Path) -> list[SimBus]:
         settings, drives = sim_settings(plan, model.simulation or {})
         buses.append(SimBus(settings, drives, link=plan.port))
     if not buses:
-        raise UsageError(f"{path} has no bus with a device path to simulate")
+        chosen = f"of {', '.join(only)} " if only else ""
+        raise UsageError(f"{path} has no bus {chosen}with a device path to simulate")
     return buses
 
 

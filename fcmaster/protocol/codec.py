@@ -45,6 +45,9 @@ class Exchange:
     parameter: ParameterKey | None = None
     index: int = 0
     carries_control: bool = False  # the request commands the drive (FC: CTW bit 10 = 1)
+    # The drive restarts on this request (an inverter reset): its output goes off and it
+    # hears nothing for this many seconds, so it must not be addressed again before then.
+    deaf_s: float = 0.0
 
     @property
     def expects_reply(self) -> bool:
@@ -157,8 +160,12 @@ class DriveCodec(Protocol):
 
     def read(
         self, address: int, parameter: ParameterKey, index: int, intent: ControlIntent | None
-    ) -> Exchange:
-        """Read a parameter (``intent`` rides along where the protocol carries it)."""
+    ) -> tuple[Exchange, ...]:
+        """The exchanges that read a parameter, in order; the last one's reply holds the value.
+
+        ``intent`` rides along where the protocol carries it. Most protocols need one
+        exchange; some must select something first (Mitsubishi: the parameter page, HFF).
+        """
 
     def write(
         self,
@@ -169,11 +176,12 @@ class DriveCodec(Protocol):
         intent: ControlIntent | None,
         *,
         persist: bool = False,
-    ) -> Exchange:
-        """Write a parameter; UsageError if the value cannot be represented.
+    ) -> tuple[Exchange, ...]:
+        """The exchanges that write a parameter, in order; the last one's reply confirms it.
 
-        ``persist`` also stores it in non-volatile memory where the protocol tells the two
-        apart (FC: AK E/D instead of 2/3).
+        UsageError if the value cannot be represented. ``persist`` also stores it in
+        non-volatile memory where the protocol tells the two apart (FC: AK E/D instead of
+        2/3).
         """
 
     def parse(self, exchange: Exchange, frame: bytes) -> Reply:

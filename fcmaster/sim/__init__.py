@@ -12,8 +12,10 @@ or on a pty: ``async with PtyServer(line, clock=clock, link="/tmp/ttyFC") as ser
 
 from fcmaster.sim.build import SIM_PROTOCOLS, SimProtocol, build_line
 from fcmaster.sim.danfoss_fc import FcSimDrive
+from fcmaster.sim.enc import EncSimDrive
 from fcmaster.sim.faults import FaultPlan, parse_faults
 from fcmaster.sim.line import LineCounters, RequestFramer, SimDrive, SimLine, Transaction
+from fcmaster.sim.mitsubishi import MitsubishiSimDrive
 from fcmaster.sim.motor import Mode, Motor, MotorCommand, MotorRating
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
@@ -23,10 +25,12 @@ __all__ = [
     "SIM_PROTOCOLS",
     "SIM_SCHEME",
     "DriveSettings",
+    "EncSimDrive",
     "FaultPlan",
     "FcSimDrive",
     "LineCounters",
     "LineSettings",
+    "MitsubishiSimDrive",
     "Mode",
     "Motor",
     "MotorCommand",

@@ -12,11 +12,14 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Final
 
+from fcmaster.bus.plan import LinePlan
 from fcmaster.clock import Clock
 from fcmaster.errors import UsageError
 from fcmaster.protocol.danfoss_fc.framer import FcFramer
 from fcmaster.sim.danfoss_fc.drive import FcSimDrive
+from fcmaster.sim.enc.drive import EncRequestFramer, EncSimDrive
 from fcmaster.sim.line import RequestFramer, SimDrive, SimLine
+from fcmaster.sim.mitsubishi import MitsubishiSimDrive, line_parameters, line_receiver
 from fcmaster.sim.settings import DriveSettings, LineSettings
 
 # address, settings, the line's settings, power-up time → a drive
@@ -30,14 +33,43 @@ class SimProtocol:
     framer_factory: Callable[[], RequestFramer]
     new_drive: DriveFactory
     addresses: range  # addresses a drive may have
+    # When the request format is a drive setting (Mitsubishi: Pr.123, Pr.124), the framer
+    # for a line of drives with these settings; framer_factory is not used then.
+    framer_for: Callable[[list[DriveSettings]], RequestFramer] | None = None
+    # Drive settings a bus's config implies (Mitsubishi: Pr.124 from its terminator).
+    line_parameters: Callable[[LinePlan], dict[str, float]] | None = None
+    # The drives time each reply themselves (Mitsubishi: the request's waiting time), so
+    # the bus's response delay is not theirs.
+    own_timing: bool = False
 
 
 def _fc_drive(address: int, settings: DriveSettings, line: LineSettings, now: float) -> SimDrive:
     return FcSimDrive(address, settings, now=now, line=line)
 
 
+def _mitsubishi_drive(
+    address: int, settings: DriveSettings, line: LineSettings, now: float
+) -> SimDrive:
+    return MitsubishiSimDrive(address, settings, now=now, line=line)
+
+
+def _enc_drive(address: int, settings: DriveSettings, line: LineSettings, now: float) -> SimDrive:
+    return EncSimDrive(address, settings, now=now, line=line)
+
+
 SIM_PROTOCOLS: Final[dict[str, SimProtocol]] = {
     "danfoss-fc": SimProtocol(FcFramer, _fc_drive, range(1, 127)),
+    # 0 and 127 (broadcast) cannot name one drive; F2.15 allows them, the master does not
+    "enc": SimProtocol(EncRequestFramer, _enc_drive, range(1, 127)),
+    # stations 0-31; the link has no broadcast, so 0 is a drive like the others
+    "mitsubishi": SimProtocol(
+        line_receiver,
+        _mitsubishi_drive,
+        range(0, 32),
+        framer_for=line_receiver,
+        line_parameters=line_parameters,
+        own_timing=True,
+    ),
 }
 
 
@@ -67,9 +99,13 @@ def build_line(
     if repeated:
         raise UsageError(f"addresses {repeated} appear more than once on line {line.name}")
     now = clock.now()
+    framer_factory = protocol.framer_factory
+    if protocol.framer_for is not None:
+        framer = protocol.framer_for([settings for _, settings in drives])
+        framer_factory = lambda: framer  # noqa: E731 - the line asks for its one framer
     return SimLine(
         drives=[protocol.new_drive(address, settings, line, now) for address, settings in drives],
-        framer_factory=protocol.framer_factory,
+        framer_factory=framer_factory,
         baudrate=line.baudrate,
         char_bits=line.char_bits,
         clock=clock,

@@ -31,7 +31,7 @@ from typing import Any, Final
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.clock import Clock
 from fcmaster.errors import ConfigError, FcmasterError
-from fcmaster.sim.build import build_line
+from fcmaster.sim.build import SIM_PROTOCOLS, build_line
 from fcmaster.sim.faults import FaultPlan, parse_faults
 from fcmaster.sim.line import SimLine
 from fcmaster.sim.motor import MotorRating
@@ -83,6 +83,8 @@ def sim_settings(
     line = LineSettings(
         name=plan.name, protocol=plan.protocol, baudrate=plan.baudrate, parity=plan.parity,
         stopbits=plan.stopbits, databits=plan.databits, faults=faults,
+        address_encoding=plan.address_encoding, response_encoding=plan.response_encoding,
+        fault_encoding=plan.fault_encoding,
     )  # fmt: skip
     return line, drives
 
@@ -97,16 +99,24 @@ def _drive(
     here = f"{where}.drives.{drive.address}"
     _check_keys(own, _DRIVE_KEYS, here)
     merged = {**common, **own}
-    delay_ms = merged.get("response_delay_ms", plan.response_delay_s * 1000.0)
+    protocol = SIM_PROTOCOLS.get(plan.protocol)
+    # A drive that times its own replies (Mitsubishi) keeps its factory timing unless the
+    # simulation section gives one; the bus's response delay is only the master's allowance.
+    own_timing = protocol is not None and protocol.own_timing
+    delay_ms = merged.get("response_delay_ms", None if own_timing else plan.response_delay_s * 1e3)
+    implied = protocol.line_parameters(plan) if protocol and protocol.line_parameters else {}
     nominal = drive.nominal_frequency_hz
     try:
         return DriveSettings(
-            response_delay_s=float(delay_ms) / 1000.0,
+            response_delay_s=None if delay_ms is None else float(delay_ms) / 1000.0,
             rating=MotorRating(frequency_hz=nominal, speed_rpm=_RPM_PER_HZ * nominal),
             load=float(merged.get("load", 0.7)),
             reference_100_hz=nominal,
             max_frequency_hz=max(drive.max_frequency_hz, 1.3 * nominal),
-            parameters={str(k): float(v) for k, v in dict(own.get("parameters") or {}).items()},
+            parameters={
+                **implied,
+                **{str(k): float(v) for k, v in dict(own.get("parameters") or {}).items()},
+            },
             faults=_faults(own.get("faults"), f"{here}.faults") if "faults" in own else None,
             local=bool(own.get("local", False)),
             running_hz=float(own["running_hz"]) if "running_hz" in own else None,

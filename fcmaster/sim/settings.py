@@ -44,10 +44,17 @@ class LineSettings:
     stopbits: int = 1
     databits: int = 8
     faults: FaultPlan = field(default_factory=FaultPlan)
+    # enc: how the drives write addresses ≥ 10, response codes and fault codes (hex | decimal)
+    address_encoding: str = "hex"
+    response_encoding: str = "hex"
+    fault_encoding: str = "hex"
 
     def __post_init__(self) -> None:
         if self.parity not in ("N", "E", "O"):
             raise UsageError(f"parity {self.parity!r} is not N, E or O")
+        for name in ("address_encoding", "response_encoding", "fault_encoding"):
+            if getattr(self, name) not in ("hex", "decimal"):
+                raise UsageError(f"{name} {getattr(self, name)!r} is not hex or decimal")
         if self.stopbits not in (1, 2) or self.databits not in (7, 8) or self.baudrate <= 0:
             raise UsageError("stop bits are 1 or 2, data bits 7 or 8, baud rate positive")
 

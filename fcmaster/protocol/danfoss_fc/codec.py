@@ -139,7 +139,7 @@ class FcCodec:
         """A process telegram, or a parameter telegram reading ``read``."""
         if read is None:
             return self.control(address, intent)[0]
-        return self.read(address, read, 0, intent)
+        return self.read(address, read, 0, intent)[0]
 
     def control(self, address: int, intent: ControlIntent | None) -> tuple[Exchange, ...]:
         """One process telegram with the control word and reference of ``intent``."""
@@ -156,15 +156,15 @@ class FcCodec:
 
     def read(
         self, address: int, parameter: ParameterKey, index: int, intent: ControlIntent | None
-    ) -> Exchange:
-        """AK 1 (or AK F for a text parameter) with the given IND."""
+    ) -> tuple[Exchange, ...]:
+        """AK 1 (or AK F for a text parameter) with the given IND: one telegram."""
         spec = lookup(parameter.code)
         _check_index(spec, index)
         if spec.is_text:
             ak, ind, reply_length = RequestAk.TEXT, IND_TEXT_READ | index, _TEXT_REPLY_LENGTH
         else:
             ak, ind, reply_length = RequestAk.READ, index, PARAMETER_LENGTH
-        return self._parameter(address, ak, parameter, ind, 0, intent, Access.READ, reply_length)
+        return (self._parameter(address, ak, parameter, ind, 0, intent, Access.READ, reply_length),)
 
     def write(
         self,
@@ -175,8 +175,8 @@ class FcCodec:
         intent: ControlIntent | None,
         *,
         persist: bool = False,
-    ) -> Exchange:
-        """AK 2/3 (RAM) or E/D (RAM + EEPROM), by the parameter's width."""
+    ) -> tuple[Exchange, ...]:
+        """AK 2/3 (RAM) or E/D (RAM + EEPROM), by the parameter's width: one telegram."""
         spec = lookup(parameter.code)
         _check_index(spec, index)
         if spec.is_text or isinstance(value, str):
@@ -186,8 +186,10 @@ class FcCodec:
         raw = spec.to_raw(value)
         pwe = spec.pwe_from_raw(raw)
         ak = spec.write_ak(raw, eeprom=persist)
-        return self._parameter(
-            address, ak, parameter, index, pwe, intent, Access.WRITE, PARAMETER_LENGTH
+        return (
+            self._parameter(
+                address, ak, parameter, index, pwe, intent, Access.WRITE, PARAMETER_LENGTH
+            ),
         )
 
     def parse(self, exchange: Exchange, frame: bytes) -> Reply:

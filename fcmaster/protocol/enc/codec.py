@@ -160,7 +160,7 @@ class EncCodec:
                 address=self._address(address), command=Command.READ_VALUE, cmd_index=0x0F
             )
             return self._exchange(address, request)
-        return self.read(address, read, 0, intent)
+        return self.read(address, read, 0, intent)[0]
 
     def control(self, address: int, intent: ControlIntent) -> tuple[Exchange, ...]:
         """The run-control frames of ``intent``, in order (table in the module docstring)."""
@@ -196,7 +196,7 @@ class EncCodec:
 
     def read(
         self, address: int, parameter: ParameterKey, index: int, intent: ControlIntent | None
-    ) -> Exchange:
+    ) -> tuple[Exchange, ...]:
         """Command 10, 11, 13 or 15 by the key; ``intent`` does not ride along (§4)."""
         _check_index(index)
         command, item = split_code(parameter.code)
@@ -206,7 +206,7 @@ class EncCodec:
             aux_index=item >> 8,
             cmd_index=item & 0xFF,
         )
-        return self._exchange(address, request, access=Access.READ, parameter=parameter)
+        return (self._exchange(address, request, access=Access.READ, parameter=parameter),)
 
     def write(
         self,
@@ -217,7 +217,7 @@ class EncCodec:
         intent: ControlIntent | None,
         *,
         persist: bool = False,
-    ) -> Exchange:
+    ) -> tuple[Exchange, ...]:
         """Command 14 with the value in the function code's unit.
 
         ``persist`` changes nothing: the protocol has one write, and the manuals do not say
@@ -243,7 +243,7 @@ class EncCodec:
             cmd_index=item & 0xFF,
             data=raw,
         )
-        return self._exchange(address, request, access=Access.WRITE, parameter=parameter)
+        return (self._exchange(address, request, access=Access.WRITE, parameter=parameter),)
 
     def parse(self, exchange: Exchange, frame: bytes) -> Reply:
         """Check that ``frame`` answers ``exchange`` and read it."""
@@ -334,11 +334,25 @@ class EncCodec:
         return encode_number(address, self.address_encoding)
 
     def _frequency(self, address: int, reference_pct: float) -> int:
-        hz = reference_pct * self.nominal_hz.get(address, DEFAULT_NOMINAL_HZ) / 100.0
+        hz = reference_pct * self._nominal(address) / 100.0
         # Compared before rounding, so that NaN and infinities are refused too.
         if not 0 <= hz <= MAX_FREQUENCY_HZ:
             raise UsageError(f"{hz:g} Hz is beyond the {MAX_FREQUENCY_HZ:g} Hz a frame can carry")
         return round(hz * 100)
+
+    def _nominal(self, address: int) -> float:
+        """The Hz that 100 % means to ``address``; for a broadcast, to every drive alike."""
+        if address in self.nominal_hz:
+            return self.nominal_hz[address]
+        known = set(self.nominal_hz.values())
+        if address == 0 and len(known) > 1:
+            # One frame carries one frequency in Hz: a percentage would mean a different
+            # speed to each drive, so it cannot be broadcast.
+            raise UsageError(
+                "the drives on this line differ in nominal frequency; "
+                "a broadcast reference would mean a different speed to each"
+            )
+        return known.pop() if address == 0 and known else DEFAULT_NOMINAL_HZ
 
     @staticmethod
     def _exchange(

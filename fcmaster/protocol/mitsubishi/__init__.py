@@ -1,6 +1,12 @@
 """The Mitsubishi computer link (inverter protocol), sans-I/O (protocols/mitsubishi.md)."""
 
-from fcmaster.protocol.mitsubishi.codec import DEFAULT_MONITOR, REQUEST_WAIT_MS, MitsubishiCodec
+from fcmaster.protocol.mitsubishi.codec import (
+    DEFAULT_MONITOR,
+    DEFAULT_WAIT_MS,
+    RESTART_S,
+    MitsubishiCodec,
+    answer_delay_s,
+)
 from fcmaster.protocol.mitsubishi.describe import describe_frame
 from fcmaster.protocol.mitsubishi.error_codes import (
     ERROR_CODES,
@@ -62,6 +68,7 @@ __all__ = [
     "BY_CODE",
     "CR",
     "DEFAULT_MONITOR",
+    "DEFAULT_WAIT_MS",
     "ENQ",
     "ERROR_CODES",
     "ETX",
@@ -70,7 +77,7 @@ __all__ = [
     "LF",
     "NAK",
     "PARAMETERS",
-    "REQUEST_WAIT_MS",
+    "RESTART_S",
     "STX",
     "Ack",
     "DataReply",
@@ -86,6 +93,7 @@ __all__ = [
     "RunCommand",
     "StatusBits",
     "Terminator",
+    "answer_delay_s",
     "decode_frame",
     "decode_status",
     "describe_code",

@@ -8,11 +8,17 @@ poll, so polls only read and a monitor-only drive is never commanded by one:
   H70 current, …), so the status is never more than one poll old.
 * A control change is a running-frequency write (HED, RAM only: §8, no EEPROM wear) then
   a run command (HFA 02/04) for a run, and HFA alone for a stop (00) or a coast (80, MRS).
-  A reset is HFD H9696, which the drive does not answer (it restarts): reply length 0.
+  A reset is HFD H9696, which the drive does not answer because it restarts (§2): reply
+  length 0, and ``deaf_s`` tells the bus how long to leave the drive alone afterwards.
 * A parameter needs the link-parameter page (HFF) set before its own code, every time
-  (§9: the page is drive state and is never assumed): two transactions, which
-  :meth:`MitsubishiCodec.read_exchanges` and :meth:`write_exchanges` build. The seam's
-  ``read``/``write`` carry one exchange, so there they serve page-independent items only.
+  (§9: the page is drive state and is never assumed): :meth:`MitsubishiCodec.read` and
+  :meth:`MitsubishiCodec.write` return the page write and then the access, and the bus
+  carries both as one command. Page-independent items take one transaction.
+
+Timing (§7). A drive starts its reply after the waiting time (the digit in the request, or
+its Pr.123) and its data check time: under 12 ms for monitors, the run command and RAM
+frequency writes, under 30 ms for parameters and EEPROM writes. :func:`answer_delay_s` is
+the worst of these for a line, so that the reply deadline never cuts a slow answer short.
 
 Replies name no instruction, only the station, so :meth:`MitsubishiCodec.parse` checks the
 station echo, then that the reply has the shape the request calls for (data of the width
@@ -82,8 +88,13 @@ from fcmaster.protocol.mitsubishi.profile import (
     run_command,
 )
 
-REQUEST_WAIT_MS: Final = 0  # the digit sent when requests carry it (§7: rely on our pause)
+DEFAULT_WAIT_MS: Final = 0  # the digit sent by default (§7: rely on our own turnaround)
 TURNAROUND_S: Final = 0.010  # §2 step 4: 10 ms or more before the next request
+PARAMETER_CHECK_S: Final = 0.030  # §7: data check time of parameter and EEPROM access
+MAX_WAIT_S: Final = 0.150  # §1.1: the longest waiting time Pr.123 can set
+# How long a drive takes to come back after HFD H9696. The manuals say only that it
+# restarts; an inverter reset takes about a second, so the bus leaves it alone that long.
+RESTART_S: Final = 1.0
 ALARM_SOURCE: Final = FAULT_HISTORY.key_name
 
 DEFAULT_MONITOR: Final = tuple(parse_parameter(code) for code in ("H6F", "H70", "H71"))
@@ -100,16 +111,16 @@ class MitsubishiCodec:
         self,
         *,
         terminator: str = "cr",
-        wait_time_ms: int | None = None,
+        wait_time_ms: int | None = DEFAULT_WAIT_MS,
         nominal_hz: dict[int, float] | None = None,
     ) -> None:
         """Set up for a line whose drives have Pr.124 = ``terminator`` and Pr.123 set.
 
         Args:
             terminator: ``none``, ``cr`` or ``crlf`` (Pr.124/Pr.341 = 0, 1, 2).
-            wait_time_ms: the drives' Pr.123/Pr.337 (0-150 ms), so requests leave the
-                waiting-time digit out; None when it is 9999 and every request carries
-                the digit (this codec sends 0 ms).
+            wait_time_ms: the waiting time every request carries (0-150 ms in 10 ms
+                steps), for drives whose Pr.123/Pr.337 is 9999, the factory setting; None
+                for drives whose Pr.123 sets it, so requests leave the digit out (§1.1).
             nominal_hz: per address, the frequency that 100 % reference means (default 50).
         """
         try:
@@ -119,7 +130,6 @@ class MitsubishiCodec:
         if wait_time_ms is not None:
             wait_digit(wait_time_ms)  # 0-150 in 10 ms steps, or UsageError
         self.wait_time_ms = wait_time_ms
-        self._request_wait_ms = REQUEST_WAIT_MS if wait_time_ms is None else None
         self.nominal_hz = dict(nominal_hz or {})
         self._faulted: dict[int, bool] = {}
 
@@ -168,7 +178,10 @@ class MitsubishiCodec:
         """A status read, or a read of ``read``; never a command (``intent`` is not sent)."""
         if read is None:
             return self._exchange(address, STATUS.code, None, 0, widths=(STATUS.digits,))
-        return self.read(address, read, 0, None)
+        exchanges = self.read(address, read, 0, None)
+        if len(exchanges) != 1:  # poll_sequence lets no parameter through
+            raise UsageError(f"{read.name} needs the page first and cannot be polled")
+        return exchanges[0]
 
     def control(self, address: int, intent: ControlIntent) -> tuple[Exchange, ...]:
         """HFD 9696 for a reset; HED then HFA for a run; HFA for a stop or a coast.
@@ -185,6 +198,7 @@ class MitsubishiCodec:
                     INVERTER_RESET.digits,
                     control=True,
                     reply_length=0,  # the drive restarts instead of answering (§2)
+                    deaf_s=RESTART_S,
                 ),
             )
         command = self._exchange(
@@ -200,28 +214,8 @@ class MitsubishiCodec:
 
     def read(
         self, address: int, parameter: ParameterKey, index: int, intent: ControlIntent | None
-    ) -> Exchange:
-        """Read a page-independent item; UsageError for a parameter (see read_exchanges)."""
-        return _single(parameter, self.read_exchanges(address, parameter, index, intent))
-
-    def write(
-        self,
-        address: int,
-        parameter: ParameterKey,
-        index: int,
-        value: float | str,
-        intent: ControlIntent | None,
-        *,
-        persist: bool = False,
-    ) -> Exchange:
-        """Write a page-independent item; UsageError for a parameter (see write_exchanges)."""
-        exchanges = self.write_exchanges(address, parameter, index, value, intent, persist=persist)
-        return _single(parameter, exchanges)
-
-    def read_exchanges(
-        self, address: int, parameter: ParameterKey, index: int, intent: ControlIntent | None
     ) -> tuple[Exchange, ...]:
-        """The transactions that read ``parameter``: HFF page then the code, for a parameter."""
+        """HFF with the page, then the read code, for a parameter; the item's code otherwise."""
         target = _target(parameter, index)
         if isinstance(target, ParameterSpec):
             read = self._exchange(
@@ -235,7 +229,7 @@ class MitsubishiCodec:
         )
         return (read,)
 
-    def write_exchanges(
+    def write(
         self,
         address: int,
         parameter: ParameterKey,
@@ -245,7 +239,7 @@ class MitsubishiCodec:
         *,
         persist: bool = False,
     ) -> tuple[Exchange, ...]:
-        """The transactions that write ``parameter``.
+        """HFF with the page, then the write code, for a parameter; the item's code otherwise.
 
         ``persist`` turns a RAM set-frequency write (H6D → HED) into HEE (RAM and EEPROM).
         Parameter writes go where Pr.342 says (EEPROM unless it is 1); ``persist`` cannot
@@ -354,6 +348,7 @@ class MitsubishiCodec:
         parameter: ParameterKey | None = None,
         control: bool = False,
         reply_length: int | None = None,
+        deaf_s: float = 0.0,
     ) -> Exchange:
         """A read (``data`` None, replies of ``widths``) or a write of ``data``."""
         if data is None:
@@ -363,7 +358,7 @@ class MitsubishiCodec:
             # The longer of ACK and NAK, so the deadline never cuts a refusal short.
             access, expected = Access.WRITE, frame_length(Nak(address, 0), self.terminator)
         request = Request(
-            station=address, instruction=code, data=data, width=width, wait_ms=self._request_wait_ms
+            station=address, instruction=code, data=data, width=width, wait_ms=self.wait_time_ms
         )
         return Exchange(
             address=address,
@@ -372,22 +367,24 @@ class MitsubishiCodec:
             access=access if parameter is not None else Access.NONE,
             parameter=parameter,
             carries_control=control,
+            deaf_s=deaf_s,
         )
+
+
+def answer_delay_s(wait_time_ms: int | None) -> float:
+    """The longest a drive takes from the end of a request to the start of its reply (§7).
+
+    The waiting time (the digit, or at worst 150 ms when the drives' Pr.123 sets it and the
+    line does not know it) plus the data check time of a parameter or EEPROM access.
+    """
+    wait_s = MAX_WAIT_S if wait_time_ms is None else wait_time_ms / 1000.0
+    return wait_s + PARAMETER_CHECK_S
 
 
 def _target(parameter: ParameterKey, index: int) -> Instruction | ParameterSpec:
     if index:
         raise UsageError(f"{parameter.name}: the computer link has no index; leave it out")
     return resolve(parameter)
-
-
-def _single(parameter: ParameterKey, exchanges: tuple[Exchange, ...]) -> Exchange:
-    if len(exchanges) != 1:
-        raise UsageError(
-            f"{parameter.name} needs two transactions (the page HFF, then the parameter), "
-            "which the bus does not carry yet; instruction codes such as H6F work"
-        )
-    return exchanges[0]
 
 
 def _kind(message: Message) -> str:

@@ -45,7 +45,7 @@ def test_every_parameter_in_the_codec_table_reads_back_through_the_codec(
     clock.time += 10.0
     values = {}
     for _pnu, spec in PARAMETERS.items():
-        exchange = codec.read(1, codec.parameter(spec.number), 0, None)
+        (exchange,) = codec.read(1, codec.parameter(spec.number), 0, None)
         reply = codec.parse(exchange, transact(line, clock, exchange.request))
         assert reply.error is None, spec.number
         assert reply.value is not None
@@ -73,7 +73,7 @@ def test_reads_answer_ak_1_for_16_bit_and_ak_2_for_32_bit(clock: FakeClock) -> N
 def test_write_is_echoed_and_takes_effect(clock: FakeClock) -> None:
     line = fc_line(clock, (1,))
     codec = FcCodec()
-    exchange = codec.write(1, codec.parameter("3-41"), 0, 1.0, None)
+    (exchange,) = codec.write(1, codec.parameter("3-41"), 0, 1.0, None)
     reply = codec.parse(exchange, transact(line, clock, exchange.request))
     assert reply.value is not None
     assert reply.value.value == 1.0

@@ -87,8 +87,10 @@ async def test_registry_resolves_sim_urls() -> None:
 
 def test_build_line_refuses_what_it_cannot_simulate() -> None:
     clock = FakeClock()
-    with pytest.raises(UsageError, match="mitsubishi"):
-        build_line(LineSettings(protocol="mitsubishi"), [], clock=clock)
+    with pytest.raises(UsageError, match="modbus"):
+        build_line(LineSettings(protocol="modbus"), [], clock=clock)
+    with pytest.raises(UsageError, match="0-31"):  # Mitsubishi stations
+        build_line(LineSettings(protocol="mitsubishi"), [(32, DriveSettings())], clock=clock)
     with pytest.raises(UsageError, match="1-126"):
         build_line(LineSettings(), [(127, DriveSettings())], clock=clock)
     with pytest.raises(UsageError, match="more than once"):

@@ -270,7 +270,7 @@ def test_control_requests_decode_to_what_the_intent_says(
 def test_read_golden_frames(name: str, wire: bytes) -> None:
     enc = EncCodec()
     key = enc.parameter(name)
-    exchange = enc.read(1, key, 0, ControlIntent(Motion.RUN, reference_pct=10.0))
+    (exchange,) = enc.read(1, key, 0, ControlIntent(Motion.RUN, reference_pct=10.0))
     assert exchange == Exchange(
         address=1, request=wire, reply_length=18, access=Access.READ, parameter=key
     )
@@ -283,7 +283,7 @@ def test_read_golden_frames(name: str, wire: bytes) -> None:
 def test_write_golden_frames(name: str, value: float, wire: bytes) -> None:
     enc = EncCodec()
     key = enc.parameter(name)
-    exchange = enc.write(1, key, 0, value, None, persist=True)
+    (exchange,) = enc.write(1, key, 0, value, None, persist=True)
     assert exchange == Exchange(
         address=1, request=wire, reply_length=18, access=Access.WRITE, parameter=key
     )
@@ -342,7 +342,7 @@ def test_state_word_reply_gives_the_status_and_the_fault_report() -> None:
 
 def test_state_word_read_on_request_also_gives_the_value() -> None:
     enc = EncCodec()
-    reply = enc.parse(enc.read(1, STATE_WORD, 0, None), STATE_REVERSE_RUNNING)
+    reply = enc.parse(enc.read(1, STATE_WORD, 0, None)[0], STATE_REVERSE_RUNNING)
     assert reply.status is not None
     assert reply.value is not None
     assert (reply.value.parameter, reply.value.raw, reply.value.value) == (STATE_WORD, 5, 5.0)
@@ -376,7 +376,7 @@ def test_running_frequency_reply() -> None:
 def test_parameter_read_reply_accepts_00_and_06(wire: bytes) -> None:
     enc = EncCodec()
     key = enc.parameter("F0.01")
-    reply = enc.parse(enc.read(1, key, 0, None), wire)
+    reply = enc.parse(enc.read(1, key, 0, None)[0], wire)
     assert reply.value is not None
     assert (reply.value.parameter, reply.value.index, reply.value.raw) == (key, 0, 5000)
     assert (reply.value.value, reply.value.unit) == (50.0, "Hz")
@@ -385,7 +385,7 @@ def test_parameter_read_reply_accepts_00_and_06(wire: bytes) -> None:
 def test_parameter_write_reply_confirms_the_value() -> None:
     enc = EncCodec()
     key = enc.parameter("F0.01")
-    reply = enc.parse(enc.write(1, key, 0, 50.0, None), F0_01_50HZ)
+    reply = enc.parse(enc.write(1, key, 0, 50.0, None)[0], F0_01_50HZ)
     assert reply.value is not None
     assert reply.value.value == 50.0
 
@@ -394,7 +394,7 @@ def test_parameter_write_reply_without_data_confirms_what_was_sent() -> None:
     # "01000001": "0"×6 = 120, "1"×2 = 182
     enc = EncCodec()
     key = enc.parameter("F0.01")
-    reply = enc.parse(enc.write(1, key, 0, 50.0, None), b"~010000010182\r")
+    reply = enc.parse(enc.write(1, key, 0, 50.0, None)[0], b"~010000010182\r")
     assert reply.value is not None
     assert reply.value.raw == 5000
 
@@ -424,7 +424,7 @@ def test_short_frame_error_reply_is_a_drive_error_without_conditions(wire: bytes
 def test_slave_state_read_gives_the_response_code(wire: bytes) -> None:
     enc = EncCodec()
     key = enc.parameter("slave_state")
-    reply = enc.parse(enc.read(1, key, 0, None), wire)
+    reply = enc.parse(enc.read(1, key, 0, None)[0], wire)
     assert reply.error is None
     assert reply.value is not None
     assert (reply.value.raw, reply.value.value) == (11, 11.0)
@@ -433,7 +433,7 @@ def test_slave_state_read_gives_the_response_code(wire: bytes) -> None:
 def test_the_14_collision_goes_by_the_response_encoding() -> None:
     for options, error, value in (({}, 20, None), ({"response_encoding": "decimal"}, None, 14)):
         enc = codec(**options)
-        reply = enc.parse(enc.read(1, enc.parameter("slave_state"), 0, None), COLLIDING_14)
+        reply = enc.parse(enc.read(1, enc.parameter("slave_state"), 0, None)[0], COLLIDING_14)
         assert (reply.error and reply.error.code) == error
         assert (reply.value and reply.value.raw) == value
 
@@ -552,7 +552,7 @@ def exchanges_of(enc: EncCodec) -> st.SearchStrategy[Exchange]:
         st.booleans(),
     )
     writes = st.builds(
-        lambda address: enc.write(address, enc.parameter("F0.03"), 0, 1, None),
+        lambda address: enc.write(address, enc.parameter("F0.03"), 0, 1, None)[0],
         st.integers(1, 9),
     )
     return polls | controls | writes
@@ -576,6 +576,6 @@ def test_software_version_reply_is_a_raw_value() -> None:
     # "010000000123": "0"×8 = 180, "1"×2 = 1E2, +32 = 214, +33 = 247
     enc = EncCodec()
     key = enc.parameter("software_version")
-    reply = enc.parse(enc.read(1, key, 0, None), b"~0100000001230247\r")
+    reply = enc.parse(enc.read(1, key, 0, None)[0], b"~0100000001230247\r")
     assert reply.value is not None
     assert (reply.value.raw, reply.value.unit) == (0x0123, "")

@@ -2,7 +2,8 @@
 
 Expected frames are spelled out by hand with their sums in the comments (ASCII "0"=48
 "1"=49 "2"=50 "3"=51 "4"=52 "5"=53 "6"=54 "7"=55 "8"=56 "9"=57 "A"=65 "B"=66 "C"=67 "D"=68
-"E"=69 "F"=70). The codec sends the waiting-time digit "0" unless the line sets Pr.123.
+"E"=69 "F"=70). The codec sends the waiting-time digit "0" unless told another waiting
+time, or none when the drives' Pr.123 sets it (``wait_time_ms=None``).
 """
 
 from __future__ import annotations
@@ -16,7 +17,13 @@ from hypothesis import strategies as st
 from fcmaster.errors import MalformedReply, ProtocolError, UnexpectedReply, UsageError
 from fcmaster.protocol.codec import Access, Condition, ConditionReport, DriveCodec, DriveError
 from fcmaster.protocol.drive import ControlIntent, Motion
-from fcmaster.protocol.mitsubishi import MitsubishiCodec, Request, decode_frame
+from fcmaster.protocol.mitsubishi import (
+    RESTART_S,
+    MitsubishiCodec,
+    Request,
+    answer_delay_s,
+    decode_frame,
+)
 
 # replies, sums by hand
 STATUS_FAULT = b"\x020180\x03C9\r"  # 48+49+56+48 = 201 = 0xC9
@@ -96,8 +103,30 @@ def test_status_poll_is_a_read_of_7A(codec: MitsubishiCodec) -> None:
 
 def test_status_poll_without_waiting_digit_or_terminator() -> None:
     # 48+49+55+65 = 217 = 0xD9
-    codec = MitsubishiCodec(terminator="none", wait_time_ms=50)
+    codec = MitsubishiCodec(terminator="none", wait_time_ms=None)
     assert codec.poll(1, None, None).request == b"\x05017AD9"
+
+
+def test_the_waiting_time_travels_as_its_digit() -> None:
+    # 50 ms is digit "5": 48+49+55+65+53 = 270 = 0x10E
+    codec = MitsubishiCodec(wait_time_ms=50)
+    assert codec.poll(1, None, None).request == b"\x05017A50E\r"
+    assert MitsubishiCodec(wait_time_ms=150).poll(1, None, None).request[5:6] == b"F"
+
+
+def test_answer_delay_covers_the_waiting_time_and_parameter_access() -> None:
+    assert answer_delay_s(0) == pytest.approx(0.030)
+    assert answer_delay_s(100) == pytest.approx(0.130)
+    assert answer_delay_s(None) == pytest.approx(0.180)  # Pr.123 unknown: at worst 150 ms
+
+
+def test_reset_gets_no_reply_and_leaves_the_drive_deaf(codec: MitsubishiCodec) -> None:
+    # FD 9696: 48+49+70+68+48+57+54+57+54 = 505 = 0x1F9
+    (reset,) = codec.control(1, ControlIntent(Motion.RUN, reference_pct=50.0, reset=True))
+    assert reset.request == b"\x0501FD09696F9\r"
+    assert not reset.expects_reply
+    assert reset.deaf_s == pytest.approx(RESTART_S)
+    assert all(e.deaf_s == 0.0 for e in codec.control(1, ControlIntent(Motion.RUN)))
 
 
 @pytest.mark.parametrize("motion", list(Motion))
@@ -204,7 +233,7 @@ def test_what_the_link_cannot_carry_is_refused(
 
 def test_read_of_an_item_is_one_exchange(codec: MitsubishiCodec) -> None:
     # 6F read: 48+49+54+70+48 = 269 = 0x10D -> "0D"
-    exchange = codec.read(1, codec.parameter("H6F"), 0, None)
+    (exchange,) = codec.read(1, codec.parameter("H6F"), 0, None)
     assert exchange.request == b"\x05016F00D\r"
     assert exchange.access is Access.READ
     assert exchange.reply_length == len(FREQ_50HZ)
@@ -212,30 +241,32 @@ def test_read_of_an_item_is_one_exchange(codec: MitsubishiCodec) -> None:
 
 def test_parameter_read_sets_the_page_first(codec: MitsubishiCodec) -> None:
     # FF 00: 48+49+70+70+48+48+48 = 381 = 0x17D; 07 read: 48+49+48+55+48 = 248 = 0xF8
-    page, read = codec.read_exchanges(1, codec.parameter("Pr.7"), 0, None)
+    page, read = codec.read(1, codec.parameter("Pr.7"), 0, None)
     assert page.request == b"\x0501FF0007D\r"
     assert read.request == b"\x0501070F8\r"
     assert read.reply_length == len(b"\x02010000AA\x0300\r")  # six digits fit
-    with pytest.raises(UsageError):  # the seam carries one exchange
-        codec.read(1, codec.parameter("Pr.7"), 0, None)
+    assert (page.access, read.access) == (Access.NONE, Access.READ)
+    with pytest.raises(UsageError):  # a parameter cannot be polled: it needs the page
+        codec.poll(1, None, codec.parameter("Pr.7"))
 
 
 def test_parameter_write_in_its_unit(codec: MitsubishiCodec) -> None:
     # Pr.7 = 5.0 s -> 50 = 0x0032: 48+49+56+55+48+48+48+51+50 = 453 = 0x1C5
-    page, write = codec.write_exchanges(1, codec.parameter("Pr.7"), 0, 5.0, None)
+    page, write = codec.write(1, codec.parameter("Pr.7"), 0, 5.0, None)
     assert page.request == b"\x0501FF0007D\r"
     assert write.request == b"\x05018700032C5\r"
     # Pr.122 = 9999 (no check) travels as HFFFF, on page 1 (FF 01: 381 + 1 = 0x17E)
-    page, write = codec.write_exchanges(1, codec.parameter("Pr.122"), 0, 9999, None)
+    page, write = codec.write(1, codec.parameter("Pr.122"), 0, 9999, None)
     assert page.request == b"\x0501FF0017E\r"
     assert write.request[5:10] == b"0FFFF"
 
 
 def test_set_frequency_write_goes_to_ram_unless_persisted(codec: MitsubishiCodec) -> None:
     key = codec.parameter("H6D")
-    assert codec.write(1, key, 0, 50.0, None).request[3:5] == b"ED"
+    assert codec.write(1, key, 0, 50.0, None)[0].request[3:5] == b"ED"
     # EE 1388: 48+49+69+69+48+49+51+56+56 = 495 = 0x1EF
-    assert codec.write(1, key, 0, 50.0, None, persist=True).request == b"\x0501EE01388EF\r"
+    (persisted,) = codec.write(1, key, 0, 50.0, None, persist=True)
+    assert persisted.request == b"\x0501EE01388EF\r"
 
 
 @pytest.mark.parametrize(
@@ -292,7 +323,7 @@ def test_status_reply_is_normalised(
 
 
 def test_output_frequency_reply(codec: MitsubishiCodec) -> None:
-    result = codec.parse(codec.read(1, codec.parameter("H6F"), 0, None), FREQ_50HZ)
+    result = codec.parse(codec.read(1, codec.parameter("H6F"), 0, None)[0], FREQ_50HZ)
     assert result.output_frequency_hz == pytest.approx(50.0)
     assert result.value is not None
     assert (result.value.raw, result.value.value, result.value.unit) == (5000, 50.0, "Hz")
@@ -301,7 +332,7 @@ def test_output_frequency_reply(codec: MitsubishiCodec) -> None:
 def test_fault_history_is_an_alarm_only_while_the_status_shows_a_fault(
     codec: MitsubishiCodec,
 ) -> None:
-    history = codec.read(1, codec.parameter("H74"), 0, None)
+    (history,) = codec.read(1, codec.parameter("H74"), 0, None)
     assert codec.parse(history, FAULTS_THT_OPT).conditions is None  # status not known yet
     assert codec.parse(codec.poll(1, None, None), STATUS_FAULT).conditions is None
     result = codec.parse(history, FAULTS_THT_OPT)
@@ -324,7 +355,7 @@ def test_nak_is_the_drives_refusal(codec: MitsubishiCodec) -> None:
 
 
 def test_ack_confirms_a_write_with_its_value(codec: MitsubishiCodec) -> None:
-    exchange = codec.write(3, codec.parameter("H6D"), 0, 42.5, None)
+    (exchange,) = codec.write(3, codec.parameter("H6D"), 0, 42.5, None)
     result = codec.parse(exchange, ACK_3)
     assert result.error is None
     assert result.value is not None
@@ -333,7 +364,7 @@ def test_ack_confirms_a_write_with_its_value(codec: MitsubishiCodec) -> None:
 
 
 def test_parameter_read_reply_with_the_9999_setting(codec: MitsubishiCodec) -> None:
-    _, read = codec.read_exchanges(1, codec.parameter("Pr.122"), 0, None)
+    _, read = codec.read(1, codec.parameter("Pr.122"), 0, None)
     value = codec.parse(read, PR_9999).value
     assert value is not None
     assert (value.value, value.raw, value.unit) == (9999.0, 0xFFFF, "s")
@@ -376,8 +407,8 @@ def test_parse_raises_only_protocol_errors(make: str, frame: bytes) -> None:
     elif make == "stop":
         exchange = codec.control(1, ControlIntent())[0]
     elif make == "H6D":
-        exchange = codec.write(1, codec.parameter(make), 0, 1.0, None)
+        exchange = codec.write(1, codec.parameter(make), 0, 1.0, None)[-1]
     else:
-        exchange = codec.read_exchanges(1, codec.parameter(make), 0, None)[-1]
+        exchange = codec.read(1, codec.parameter(make), 0, None)[-1]
     with contextlib.suppress(ProtocolError):
         codec.parse(exchange, frame)

@@ -1,0 +1,234 @@
+"""Line efficiency per protocol: the real master against the timed simulator over a pty.
+
+Run: ``python benchmarks/bus_protocols.py --protocol mitsubishi [--baudrates 9600,19200]
+[--drives 8] [--duration S] [--output PATH]``.
+
+This is the protocol-neutral sibling of ``benchmarks/bus.py`` (which measures the FC line
+in depth: overhead, command latency, CPU, epoll against the precise loop). Here one case
+is a protocol at a baud rate at its factory character format, and the figure is how much
+of the line the master keeps busy with useful transactions:
+
+* The simulator runs in its own process (this script with ``--serve-sim``), as in
+  ``bus.py``: :func:`~fcmaster.sim.build_line` and :class:`~fcmaster.sim.PtyServer` under
+  fcmaster's precise event loop, so it never shares a loop or a GIL with the master.
+* The master is the real :class:`~fcmaster.bus.master.BusMaster` on the real
+  :class:`~fcmaster.bus.serial.SerialTransport`, the plan set up as the config does it
+  (``codec_for``, the protocol's answer delay). Every drive is monitor-only with the
+  protocol's default monitor list, so the line carries exactly the idle-poll rotation.
+* **line efficiency** = transactions per second ÷ the limit 1 / T, where T is the mean,
+  over one poll rotation, of request and reply on the wire (characters × bits per
+  character ÷ baud), the simulated drive's answer delay for that request, and the pause the
+  protocol asks after a reply (``codec.min_pause_s``). T is the line with a master that
+  costs nothing; the shortfall is the master's overhead, the pty and the machine's load.
+
+Per protocol (:data:`PROTOCOLS`): the factory character format, the stations to use and the
+simulated drive's answer delay. Another protocol is one more entry there.
+
+Benchmarks are not tests: nothing here passes or fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+from fcmaster import logsetup
+from fcmaster.bus.codecs import codec_for, response_delay_s
+from fcmaster.bus.master import BusMaster
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.bus.serial import SerialTransport
+from fcmaster.clock import MonotonicClock, new_event_loop
+from fcmaster.protocol.codec import DriveCodec, Exchange
+from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
+from fcmaster.sim.mitsubishi.drive import DEFAULT_CHECK_S
+
+WARMUP_S: Final = 0.5
+DEFAULT_OUTPUT: Final = Path(__file__).resolve().parent / "results" / "bus_protocols.json"
+
+
+@dataclass(slots=True, frozen=True)
+class Protocol:
+    """What a case of one protocol needs."""
+
+    parity: str
+    stopbits: int
+    first_address: int
+    # the simulated drive's delay from the end of a request to its reply
+    answer_s: Callable[[Exchange], float]
+    drive: DriveSettings = field(default_factory=DriveSettings)  # every simulated drive
+
+
+PROTOCOLS: Final[dict[str, Protocol]] = {
+    # Factory 8E2 (Pr.119 = 1, Pr.120 = 2); the waiting-time digit 0 travels; the drive
+    # checks a monitor request in DEFAULT_CHECK_S (the manual allows up to 12 ms).
+    "mitsubishi": Protocol("E", 2, 0, lambda exchange: DEFAULT_CHECK_S),  # stations 0-31
+    # Factory 8N1 (F2.14 = 03), every drive answering 5 ms after a request.
+    "enc": Protocol("N", 1, 1, lambda exchange: 0.005, DriveSettings(response_delay_s=0.005)),
+}
+
+
+@dataclass(slots=True, frozen=True)
+class Case:
+    """One protocol at one baud rate with ``drives`` monitor-only drives."""
+
+    protocol: str
+    baudrate: int
+    drives: int
+
+    @property
+    def spec(self) -> Protocol:
+        """The protocol's entry in :data:`PROTOCOLS`."""
+        return PROTOCOLS[self.protocol]
+
+    def plan(self, port: str) -> LinePlan:
+        """The master's plan, as the config would make it."""
+        first = self.spec.first_address
+        plan = LinePlan(
+            name="bench", port=port, protocol=self.protocol, baudrate=self.baudrate,
+            parity=self.spec.parity, stopbits=self.spec.stopbits,
+            drives=tuple(DrivePlan(name=f"d{a}", address=a)
+                         for a in range(first, first + self.drives)),
+        )  # fmt: skip
+        delay_s = response_delay_s(plan)
+        return plan if delay_s is None else dataclasses.replace(plan, response_delay_s=delay_s)
+
+    def transaction_s(self) -> float:
+        """T: the mean ideal time of one idle poll over the rotation (module docstring)."""
+        plan = self.plan("")
+        codec: DriveCodec = codec_for(plan)
+        address = self.spec.first_address
+        times = []
+        for read in codec.poll_sequence(codec.default_monitor()):
+            exchange = codec.poll(address, None, read)
+            wire = plan.wire_s(len(exchange.request) + exchange.reply_length)
+            times.append(wire + self.spec.answer_s(exchange) + codec.min_pause_s(plan.char_s))
+        return sum(times) / len(times)
+
+
+# -- the simulator process ---------------------------------------------------------------
+
+
+async def _serve_sim(case: Case) -> None:
+    """Serve the case's line on a pty; print its path; run until stdin closes."""
+    clock = MonotonicClock()
+    first = case.spec.first_address
+    line = build_line(
+        LineSettings(name="bench", protocol=case.protocol, baudrate=case.baudrate,
+                     parity=case.spec.parity, stopbits=case.spec.stopbits),
+        [(a, case.spec.drive) for a in range(first, first + case.drives)],
+        clock=clock,
+    )  # fmt: skip
+    loop = asyncio.get_running_loop()
+    async with PtyServer(line, clock=clock) as server:
+        print(server.device, flush=True)
+        while await loop.run_in_executor(None, sys.stdin.readline):
+            pass
+
+
+@contextlib.contextmanager
+def simulator(case: Case) -> Iterator[str]:
+    """A simulator process for the block; its pty path."""
+    spec = f"{case.protocol},{case.baudrate},{case.drives}"
+    process = subprocess.Popen(
+        [sys.executable, os.path.abspath(__file__), "--serve-sim", spec],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert process.stdin is not None
+    assert process.stdout is not None
+    try:
+        path = process.stdout.readline().strip()
+        if not path:
+            raise RuntimeError(f"the simulator did not start ({spec})")
+        yield path
+    finally:
+        process.stdin.close()
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        process.stdout.close()
+
+
+# -- the master side -------------------------------------------------------------------
+
+
+async def run_case(case: Case, path: str, duration_s: float) -> dict[str, Any]:
+    """Poll for ``duration_s`` after a warm-up; the case's figures."""
+    plan = case.plan(path)
+    transport = SerialTransport(
+        path, baudrate=plan.baudrate, parity=plan.parity, stopbits=plan.stopbits
+    )
+    clock = MonotonicClock()
+    async with BusMaster(plan, codec=codec_for(plan), transport=transport, clock=clock) as master:
+        if not master.is_up:
+            raise RuntimeError(f"the master could not open {path}")
+        await asyncio.sleep(WARMUP_S)
+        stats = master.stats
+        replies, timeouts, start = stats.replies, stats.timeouts, clock.now()
+        await asyncio.sleep(duration_s)
+        elapsed = clock.now() - start
+        replies, timeouts = stats.replies - replies, stats.timeouts - timeouts
+    transaction_s = case.transaction_s()
+    per_s = replies / elapsed
+    return {
+        "protocol": case.protocol,
+        "baudrate": case.baudrate,
+        "format": f"8{case.spec.parity}{case.spec.stopbits}",
+        "drives": case.drives,
+        "transactions_per_s": round(per_s, 2),
+        "ideal_transaction_ms": round(transaction_s * 1000, 3),
+        "efficiency": round(per_s * transaction_s, 4),
+        "timeouts": timeouts,
+        "seconds": round(elapsed, 2),
+        "load_average": os.getloadavg()[0],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the cases; print a table; write the JSON results."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
+    parser.add_argument("--protocol", choices=sorted(PROTOCOLS), default="mitsubishi")
+    parser.add_argument("--baudrates", default="9600,19200")
+    parser.add_argument("--drives", type=int, default=8)
+    parser.add_argument("--duration", type=float, default=10.0, help="seconds per case")
+    parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
+    parser.add_argument("--serve-sim", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.serve_sim:
+        protocol, baudrate, drives = args.serve_sim.split(",")
+        with asyncio.Runner(loop_factory=new_event_loop) as runner:
+            runner.run(_serve_sim(Case(protocol, int(baudrate), int(drives))))
+        return 0
+    logsetup.configure(level="warning", fmt="json")
+    rows = []
+    for baudrate in (int(b) for b in args.baudrates.split(",")):
+        case = Case(args.protocol, baudrate, args.drives)
+        with simulator(case) as path, asyncio.Runner(loop_factory=new_event_loop) as runner:
+            row = runner.run(run_case(case, path, args.duration))
+        rows.append(row)
+        print(
+            f"{row['protocol']:<11} {row['baudrate']:>6} {row['format']}  "
+            f"{row['transactions_per_s']:>7.2f}/s  T={row['ideal_transaction_ms']:.2f} ms  "
+            f"efficiency {row['efficiency']:.3f}  timeouts {row['timeouts']}  "
+            f"load {row['load_average']:.2f}",
+            flush=True,
+        )
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps({"cases": rows, "at": time.time()}, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,156 @@
+"""The commissioning commands (`scan`, `status`, `read`, `write`, `control`) on a Mitsubishi line.
+
+Each command runs as its own `python -m fcmaster` process against simulated inverters at
+the factory line settings (19200 8E2, CR, waiting time in the frame) served on a
+pseudo-terminal by the test's event loop, as a technician would run them on a real line.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import sys
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fcmaster.clock import MonotonicClock
+from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
+from fcmaster.sim.mitsubishi import MitsubishiSimDrive
+
+LIMIT_S = 60.0
+STATIONS = (0, 3, 10)
+
+
+@asynccontextmanager
+async def served() -> AsyncIterator[PtyServer]:
+    clock = MonotonicClock()
+    running = DriveSettings(running_hz=20.0)
+    line = build_line(
+        LineSettings(protocol="mitsubishi", baudrate=19200, parity="E", stopbits=2),
+        [(a, running if a == 10 else DriveSettings()) for a in STATIONS],
+        clock=clock,
+    )
+    async with asyncio.timeout(LIMIT_S), PtyServer(line, clock=clock) as server:
+        yield server
+
+
+async def fcmaster(server: PtyServer, *args: str) -> tuple[int, str, str]:
+    """Run one command against the served line; exit code, stdout and stderr."""
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "fcmaster", args[0], "--port", server.device,
+        "--protocol", "mitsubishi", *args[1:],
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    out, err = await process.communicate()
+    assert process.returncode is not None
+    return process.returncode, out.decode(), err.decode()
+
+
+def drive(server: PtyServer, address: int) -> MitsubishiSimDrive:
+    found = next(d for d in server.line.drives if d.address == address)
+    assert isinstance(found, MitsubishiSimDrive)
+    return found
+
+
+async def test_scan_finds_the_stations_that_answer_station_0_included() -> None:
+    async with served() as server:
+        code, out, err = await fcmaster(server, "scan", "--addresses", "0-11", "--json")
+    assert code == 0, err
+    found = json.loads(out)
+    assert [entry["address"] for entry in found] == [0, 3, 10]
+    assert [entry["running"] for entry in found] == [False, False, True]
+    assert found[2]["status_word"] == 0x4B  # RUN, forward, up to frequency, FU (H7A)
+
+
+async def test_status_shows_one_drive_decoded() -> None:
+    async with served() as server:
+        code, out, err = await fcmaster(server, "status", "--address", "10", "--json")
+    assert code == 0, err
+    state = json.loads(out)
+    assert state["protocol"] == "mitsubishi"
+    assert (state["running"], state["fault"], state["direction"]) == (True, False, "forward")
+    assert state["output_frequency_hz"] == 20.0
+    assert state["values"]["H6F"] == {"value": 20.0, "unit": "Hz"}
+    assert state["values"]["H71"]["unit"] == "V"
+    assert state["alarms"] == []
+
+
+async def test_read_and_write_a_parameter_through_its_page() -> None:
+    async with served() as server:
+        code, _, err = await fcmaster(server, "write", "--address", "3", "Pr.7", "2.5")
+        assert code == 0, err
+        assert drive(server, 3).parameters[7] == 25
+        code, out, err = await fcmaster(server, "read", "--address", "3", "Pr.7", "--json")
+        assert code == 0, err
+        assert json.loads(out) == {
+            "parameter": "Pr.7", "index": 0, "value": 2.5, "unit": "s", "raw": 25,
+        }  # fmt: skip
+        code, out, _ = await fcmaster(server, "read", "--address", "3", "Pr.122", "--json")
+        assert code == 0
+        assert json.loads(out)["value"] == 9999.0  # no communication check in the simulator
+
+        # The drive refuses a value beyond the parameter's range: NAK C, exit 1.
+        code, _, err = await fcmaster(server, "write", "--address", "3", "Pr.7", "4000")
+        assert code == 1
+        assert "refused" in err
+        assert "Data range" in err
+        # A name the protocol cannot address is the user's mistake, not the drive's.
+        code, _, err = await fcmaster(server, "read", "--address", "3", "16-13")
+        assert code == 2
+        code, _, err = await fcmaster(server, "read", "--address", "32", "H7A")
+        assert code == 2
+        assert "0-31" in err
+
+
+async def test_control_starts_stops_and_resets_a_drive() -> None:
+    async with served() as server:
+        sim = drive(server, 0)
+        args = ("--address", "0", "--nominal-frequency", "50")
+        code, _, err = await fcmaster(server, "control", *args, "start", "--frequency", "30")
+        assert code == 0, err
+        assert sim.control.set_hz == 30.0
+        assert sim.control.run_bits == 0x02  # STF
+        code, _, err = await fcmaster(server, "control", *args, "reverse")
+        assert code == 0, err
+        assert sim.control.run_bits == 0x04  # STR
+        code, _, _ = await fcmaster(server, "control", *args, "stop")
+        assert code == 0
+        assert sim.control.run_bits == 0
+
+        before = MonotonicClock().now()
+        code, _, err = await fcmaster(server, "control", *args, "reset")
+        assert code == 0, err  # no reply expected, none waited for
+        assert sim.deaf_until > before  # HFD 9696 reached it: the drive is restarting
+
+        # Beyond the given maximum is refused before anything reaches the wire.
+        code, _, err = await fcmaster(server, "control", *args, "start", "--frequency", "60")
+        assert code == 1
+        assert "limit" in err
+        code, _, err = await fcmaster(server, "control", *args, "jog")
+        assert code != 0
+        assert "jog" in err
+
+
+async def test_fcmaster_sim_serves_mitsubishi_drives_that_scan_finds() -> None:
+    sim = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "fcmaster", "sim", "--protocol", "mitsubishi",
+        "--addresses", "0-1", "--stopbits", "2",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        assert sim.stdout is not None
+        async with asyncio.timeout(LIMIT_S):
+            name, path = (await sim.stdout.readline()).decode().split()
+            assert name == "line1"
+            scan = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "fcmaster", "scan", "--port", path,
+                "--protocol", "mitsubishi", "--addresses", "0-3", "--json",
+                stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+            )  # fmt: skip
+            out, err = await scan.communicate()
+        assert scan.returncode == 0, err.decode()
+        assert [entry["address"] for entry in json.loads(out)] == [0, 1]
+    finally:
+        if sim.returncode is None:
+            sim.terminate()
+        await asyncio.wait_for(sim.wait(), 10)

@@ -1,0 +1,168 @@
+"""The real BusMaster over a real pty against simulated Mitsubishi inverters.
+
+Everything below the master is real: termios, the pty, the simulator's wire timing (12-bit
+characters at 8E2, the waiting time, the data check time) and its injected faults. The line
+is set up the way the config does it: ``codec_for`` and the protocol's answer delay.
+"""
+
+import asyncio
+import dataclasses
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+
+from fcmaster.bus.codecs import codec_for, response_delay_s
+from fcmaster.bus.commands import Outcome
+from fcmaster.bus.master import BusMaster
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.bus.serial import SerialTransport
+from fcmaster.clock import MonotonicClock
+from fcmaster.protocol.drive import Motion
+from fcmaster.protocol.mitsubishi import RESTART_S
+from fcmaster.sim.build import build_line
+from fcmaster.sim.faults import FaultPlan
+from fcmaster.sim.mitsubishi import MitsubishiSimDrive
+from fcmaster.sim.pty import PtyServer
+from fcmaster.sim.settings import DriveSettings, LineSettings
+
+LIMIT_S = 40.0
+STATIONS = (0, 1, 10, 31)  # 10 is "0A" on the wire, 31 "1F"
+
+
+@asynccontextmanager
+async def line_with_master(
+    faults: FaultPlan,
+    *,
+    drive_faults: dict[int, FaultPlan] | None = None,
+    parameters: dict[str, float] | None = None,
+) -> AsyncIterator[tuple[PtyServer, BusMaster]]:
+    clock = MonotonicClock()
+    own = drive_faults or {}
+    line = build_line(
+        LineSettings(protocol="mitsubishi", baudrate=38400, stopbits=2, faults=faults),
+        [(a, DriveSettings(faults=own.get(a), parameters=parameters or {})) for a in STATIONS],
+        clock=clock,
+    )
+    drives = tuple(
+        DrivePlan(name=f"d{a}", address=a, control=a == 1, monitor=("H6F", "H70")) for a in STATIONS
+    )
+    async with asyncio.timeout(LIMIT_S), PtyServer(line, clock=clock) as server:
+        plan = LinePlan(
+            name="pty", port=server.device, protocol="mitsubishi", baudrate=38400, stopbits=2,
+            drives=drives, offline_after=5, probe_interval_s=0.5,
+        )  # fmt: skip
+        delay_s = response_delay_s(plan)
+        assert delay_s is not None
+        plan = dataclasses.replace(plan, response_delay_s=delay_s)
+        transport = SerialTransport(plan.port, baudrate=38400, parity="E", stopbits=2)
+        codec = codec_for(plan)
+        async with BusMaster(plan, codec=codec, transport=transport, clock=clock) as master:
+            yield server, master
+
+
+def sim_drive(server: PtyServer, address: int) -> MitsubishiSimDrive:
+    drive = next(d for d in server.line.drives if d.address == address)
+    assert isinstance(drive, MitsubishiSimDrive)
+    return drive
+
+
+async def wait_for(condition: Callable[[], object], timeout_s: float = 10.0) -> None:
+    """Poll ``condition`` (state of the master and the simulator, which signal nothing)."""
+    async with asyncio.timeout(timeout_s):
+        while not condition():  # noqa: ASYNC110 - nothing to wait on but the state itself
+            await asyncio.sleep(0.02)
+
+
+async def test_polls_commands_and_parameter_access_over_the_pty() -> None:
+    async with line_with_master(FaultPlan()) as (server, master):
+        await wait_for(lambda: all(s.online for s in master.planner.slots))
+        d1, drive = master.drive("d1"), sim_drive(server, 1)
+        started = await d1.start(frequency_hz=30.0)
+        assert started.outcome is Outcome.DONE, started.reason
+        assert drive.control.set_hz == 30.0  # HED 0BB8 reached the drive
+        await wait_for(lambda: abs(drive.motor.frequency_hz - 30.0) < 0.01)
+        slot = master.planner.slot("d1")
+        await wait_for(lambda: slot.output_pct is not None and slot.output_pct > 59.0)
+        changed = await d1.set_reference(frequency_hz=20.0)
+        assert changed.outcome is Outcome.DONE, changed.reason
+        assert drive.control.set_hz == 20.0
+        read = await master.drive("d31").read("Pr.7")
+        assert read.outcome is Outcome.DONE, read.reason
+        assert read.value is not None
+        assert (read.value.value, read.value.unit) == (5.0, "s")
+        written = await d1.write("Pr.8", 2.5)
+        assert written.outcome is Outcome.DONE, written.reason
+        assert drive.parameters[8] == 25
+        monitored = await master.drive("d10").read("H6F")
+        assert monitored.outcome is Outcome.DONE
+        assert monitored.value is not None
+        assert monitored.value.value == 0.0  # never started
+        stopped = await d1.stop()
+        assert stopped.outcome is Outcome.DONE
+        await wait_for(lambda: not drive.motor.output_on)
+        assert master.stats.timeouts == 0
+        assert master.stats.checksum_errors == 0
+
+
+async def test_a_refusal_comes_back_with_the_drives_error_code() -> None:
+    async with line_with_master(FaultPlan()) as (server, master):
+        await wait_for(lambda: master.planner.slot("d1").online)
+        result = await master.drive("d1").write("Pr.7", 4000.0)  # beyond 3600.0 s
+        assert result.outcome is Outcome.REFUSED
+        assert result.error is not None
+        assert result.error.code == 0xC
+        assert "Data range" in result.reason
+        assert sim_drive(server, 1).parameters[7] == 50  # unchanged
+        beyond = await master.drive("d1").start(frequency_hz=80.0)  # configured max 50 Hz
+        assert beyond.outcome is Outcome.NOT_ALLOWED
+
+
+async def test_faults_are_counted_and_every_command_ends_once() -> None:
+    faults = FaultPlan(drop=0.05, corrupt=0.05, noise=0.05, seed=5)
+    # Pr.121 = 9999: garbled requests (collisions with noise) must not trip the drives here
+    async with line_with_master(faults, parameters={"Pr.121": 9999.0}) as (server, master):
+        await wait_for(lambda: master.stats.replies >= 200, timeout_s=20.0)
+        results = await asyncio.gather(
+            *(master.drive(f"d{a}").read("Pr.7") for a in STATIONS for _ in range(3))
+        )
+        counters = server.line.counters
+    assert len(results) == 12
+    assert all(r.outcome in (Outcome.DONE, Outcome.TIMEOUT) for r in results)
+    assert sum(r.outcome is Outcome.DONE for r in results) >= 9
+    assert all(r.value is not None and r.value.value == 5.0 for r in results if r.ok)
+    stats = master.stats
+    assert stats.timeouts > 0  # dropped and corrupted replies showed up as timeouts
+    assert stats.checksum_errors + stats.noise_bytes > 0  # and as counted noise
+    assert counters.requests >= stats.replies  # no reply was invented
+
+
+async def test_a_silent_drive_is_demoted_and_comes_back() -> None:
+    silent = {10: FaultPlan(silent_periods=((0.5, 2.0),))}
+    async with line_with_master(FaultPlan(seed=1), drive_faults=silent) as (_, master):
+        slot = master.planner.slot("d10")
+        await wait_for(lambda: slot.online is False, timeout_s=5.0)
+        assert master.planner.slot("d31").online
+        await wait_for(lambda: slot.online is True, timeout_s=8.0)
+
+
+async def test_reset_restarts_the_drive_and_the_master_waits_for_it() -> None:
+    async with line_with_master(FaultPlan(), parameters={"Pr.122": 0.3}) as (server, master):
+        d1, drive = master.drive("d1"), sim_drive(server, 1)
+        await wait_for(lambda: master.planner.slot("d1").online)
+        assert (await d1.start(frequency_hz=15.0)).ok
+        timeouts = master.stats.timeouts
+        loop = asyncio.get_running_loop()
+        sent = loop.time()
+        result = await d1.reset()
+        assert result.outcome is Outcome.DONE
+        requests = master.stats.drives["d1"].requests
+        await asyncio.sleep(RESTART_S / 2)
+        assert master.stats.drives["d1"].requests == requests  # left alone while deaf
+        await wait_for(lambda: master.stats.drives["d1"].requests > requests, timeout_s=5.0)
+        assert loop.time() - sent >= RESTART_S
+        assert not drive.motor.output_on  # the reset stopped it …
+        intent = master.planner.slot("d1").intent
+        assert intent is not None
+        assert intent.motion is Motion.STOP  # … and the master will not start it again
+        await asyncio.sleep(0.5)  # polls go on: Pr.122 = 0.3 s never runs out
+        assert drive.control.fault is None
+        assert master.stats.timeouts == timeouts
