@@ -12,13 +12,19 @@ Shutdown (SIGTERM, SIGINT, or :meth:`Service.stop`) is orderly: with ``on_shutdo
 every ``control: bus`` drive is sent a stop and the service waits (bounded) for the
 results; with ``hold`` the drives are left as they are and their own control-word timeout
 acts. Then the lines close, and every command still queued ends ``cancelled``.
+
+Under systemd with ``Type=notify`` (``$NOTIFY_SOCKET`` set), the service says ``READY=1``
+once every line's port has been tried and every adapter is serving, and ``STOPPING=1``
+when the shutdown begins; elsewhere it says nothing.
 """
 
 from __future__ import annotations
 
 import asyncio
 import importlib
+import os
 import signal
+import socket
 from collections.abc import Callable
 from contextlib import AbstractAsyncContextManager, AsyncExitStack
 from typing import Any
@@ -51,6 +57,25 @@ ADAPTERS = {
     "http": "fcmaster.adapters.http:HttpAdapter",
     "mqtt": "fcmaster.adapters.mqtt:MqttAdapter",
 }
+
+
+def notify_systemd(state: str) -> None:
+    """Send ``state`` (``READY=1``, …) to systemd's ``$NOTIFY_SOCKET``, if there is one.
+
+    The sd_notify protocol: one datagram on a Unix socket, a path or (``@``) an abstract
+    name. Never blocks; a failure is logged, never raised.
+    """
+    address = os.environ.get("NOTIFY_SOCKET")
+    if not address:
+        return
+    if address.startswith("@"):
+        address = "\0" + address[1:]
+    try:
+        with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM) as sock:
+            sock.setblocking(False)
+            sock.sendto(state.encode(), address)
+    except OSError as exc:
+        log.warning("service.notify_failed", state=state, error=str(exc))
 
 
 class Service:
@@ -162,12 +187,14 @@ class Service:
                     lines=len(self.masters),
                     drives=sum(len(p.drives) for p in self.config.lines),
                 )
+                notify_systemd("READY=1")
                 stats = asyncio.create_task(self._publish_stats(), name="service.stats")
                 try:
                     await self._stopping.wait()
                 finally:
                     stats.cancel()
                 log.info("service.stopping", on_shutdown=self.config.model.on_shutdown)
+                notify_systemd("STOPPING=1")
                 if self.config.model.on_shutdown == "stop":
                     await self._stop_drives()
         finally:
