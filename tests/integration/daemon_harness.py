@@ -14,7 +14,6 @@ import contextlib
 import json
 import os
 import signal
-import socket
 import sys
 from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
@@ -26,14 +25,6 @@ T = TypeVar("T")
 
 START_S = 30.0  # a cold interpreter importing FastAPI on a busy 2-core machine
 EXIT_S = 10.0  # "promptly": the upper bound a SIGTERM must beat
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on now."""
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
 
 
 class Child:

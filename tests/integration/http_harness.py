@@ -8,7 +8,6 @@ Drive replies are folded into the fleet state exactly as a BusMaster reports the
 from __future__ import annotations
 
 import asyncio
-import socket
 import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -54,13 +53,6 @@ async def serving(
     finally:
         async with asyncio.timeout(10):
             await adapter.__aexit__(None, None, None)
-
-
-def free_port() -> int:
-    """A TCP port nobody listens on right now (for configs the service binds itself)."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
 
 
 def ws_url(adapter: HttpAdapter, query: str = "") -> str:

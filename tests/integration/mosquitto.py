@@ -12,7 +12,6 @@ import getpass
 import json
 import shutil
 import signal
-import socket
 from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
@@ -20,6 +19,8 @@ from typing import Any
 
 import aiomqtt
 import pytest
+
+from tests.integration.ports import free_port
 
 START_TIMEOUT_S = 10.0
 
@@ -33,14 +34,6 @@ def mosquitto_binary() -> str:
     if found is None:
         pytest.fail("mosquitto is not installed (apt-get install mosquitto; .ci/run does it)")
     return found
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nobody listens on right now."""
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
 
 
 class Broker:

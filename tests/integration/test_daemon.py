@@ -17,16 +17,8 @@ from typing import Any
 
 import httpx
 
-from tests.integration.daemon_harness import (
-    EXIT_S,
-    START_S,
-    Child,
-    by_name,
-    child,
-    free_port,
-    get_json,
-    until,
-)
+from tests.integration.daemon_harness import EXIT_S, START_S, Child, by_name, child, get_json, until
+from tests.integration.ports import free_port
 
 VIEWER = "viewer-token-0123456789abcdef"
 OPERATOR = "operator-token-0123456789abcdef"

@@ -24,14 +24,8 @@ import pytest
 import fcmaster
 from fcmaster.cli import DEMO_CONFIG
 from fcmaster.config import load
-from tests.integration.daemon_harness import (
-    START_S,
-    by_name,
-    child,
-    free_port,
-    get_json,
-    until,
-)
+from tests.integration.daemon_harness import START_S, by_name, child, get_json, until
+from tests.integration.ports import free_port
 
 
 def test_the_demo_serves_loopback_8080_with_anonymous_reads() -> None:

@@ -10,41 +10,26 @@ from __future__ import annotations
 import asyncio
 import json
 import sys
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from contextlib import AbstractAsyncContextManager
 
-from fcmaster.clock import MonotonicClock
-from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
+from fcmaster.sim import DriveSettings, LineSettings, PtyServer
 from fcmaster.sim.enc import EncSimDrive
+from tests.integration import commissioning
 
-LIMIT_S = 60.0
 ADDRESSES = (1, 2, 5)
 
 
-@asynccontextmanager
-async def served() -> AsyncIterator[PtyServer]:
-    clock = MonotonicClock()
+def served() -> AbstractAsyncContextManager[PtyServer]:
     settings = DriveSettings(response_delay_s=0.005, parameters={"F0.08": 1.0, "F0.09": 1.0})
     running = DriveSettings(response_delay_s=0.005, running_hz=20.0)
-    line = build_line(
+    return commissioning.served(
         LineSettings(protocol="enc", baudrate=9600, parity="N"),  # ENC's factory 9600 8N1
         [(a, running if a == 5 else settings) for a in ADDRESSES],
-        clock=clock,
     )
-    async with asyncio.timeout(LIMIT_S), PtyServer(line, clock=clock) as server:
-        yield server
 
 
 async def fcmaster(server: PtyServer, *args: str) -> tuple[int, str, str]:
-    """Run one command against the served line; exit code, stdout and stderr."""
-    process = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "fcmaster", args[0], "--port", server.device,
-        "--protocol", "enc", *args[1:],
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
-    out, err = await process.communicate()
-    assert process.returncode is not None
-    return process.returncode, out.decode(), err.decode()
+    return await commissioning.fcmaster(server, "enc", *args)
 
 
 def drive(server: PtyServer, address: int) -> EncSimDrive:
@@ -130,7 +115,7 @@ async def test_fcmaster_sim_serves_enc_drives_that_scan_finds() -> None:
     )  # fmt: skip
     try:
         assert sim.stdout is not None
-        async with asyncio.timeout(LIMIT_S):
+        async with asyncio.timeout(commissioning.LIMIT_S):
             name, path = (await sim.stdout.readline()).decode().split()
             assert name == "line1"
             scan = await asyncio.create_subprocess_exec(

@@ -22,7 +22,8 @@ from schemathesis.specs.openapi.checks import (
     status_code_conformance,
 )
 
-from tests.integration.http_harness import OPERATOR, ServiceThread, free_port, service_config
+from tests.integration.http_harness import OPERATOR, ServiceThread, service_config
+from tests.integration.ports import free_port
 
 DRIVES = ("pump-1", "pump-2", "fan-1", "fan-2")
 PARAMETERS = ("16-13", "3-41", "1-20", "15-43", "99-99")

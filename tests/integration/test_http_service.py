@@ -14,13 +14,8 @@ from websockets.asyncio.client import connect
 
 from fcmaster import config
 from fcmaster.service import Service
-from tests.integration.http_harness import (
-    OPERATOR,
-    VIEWER,
-    free_port,
-    service_config,
-    wait_until_listening,
-)
+from tests.integration.http_harness import OPERATOR, VIEWER, service_config, wait_until_listening
+from tests.integration.ports import free_port
 
 
 @asynccontextmanager

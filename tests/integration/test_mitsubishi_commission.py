@@ -10,40 +10,26 @@ from __future__ import annotations
 import asyncio
 import json
 import sys
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+import time
+from contextlib import AbstractAsyncContextManager
 
-from fcmaster.clock import MonotonicClock
-from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
+from fcmaster.sim import DriveSettings, LineSettings, PtyServer
 from fcmaster.sim.mitsubishi import MitsubishiSimDrive
+from tests.integration import commissioning
 
-LIMIT_S = 60.0
 STATIONS = (0, 3, 10)
 
 
-@asynccontextmanager
-async def served() -> AsyncIterator[PtyServer]:
-    clock = MonotonicClock()
+def served() -> AbstractAsyncContextManager[PtyServer]:
     running = DriveSettings(running_hz=20.0)
-    line = build_line(
+    return commissioning.served(
         LineSettings(protocol="mitsubishi", baudrate=19200, parity="E", stopbits=2),
         [(a, running if a == 10 else DriveSettings()) for a in STATIONS],
-        clock=clock,
     )
-    async with asyncio.timeout(LIMIT_S), PtyServer(line, clock=clock) as server:
-        yield server
 
 
 async def fcmaster(server: PtyServer, *args: str) -> tuple[int, str, str]:
-    """Run one command against the served line; exit code, stdout and stderr."""
-    process = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "fcmaster", args[0], "--port", server.device,
-        "--protocol", "mitsubishi", *args[1:],
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
-    out, err = await process.communicate()
-    assert process.returncode is not None
-    return process.returncode, out.decode(), err.decode()
+    return await commissioning.fcmaster(server, "mitsubishi", *args)
 
 
 def drive(server: PtyServer, address: int) -> MitsubishiSimDrive:
@@ -117,7 +103,7 @@ async def test_control_starts_stops_and_resets_a_drive() -> None:
         assert code == 0
         assert sim.control.run_bits == 0
 
-        before = MonotonicClock().now()
+        before = time.monotonic()
         code, _, err = await fcmaster(server, "control", *args, "reset")
         assert code == 0, err  # no reply expected, none waited for
         assert sim.deaf_until > before  # HFD 9696 reached it: the drive is restarting
@@ -139,7 +125,7 @@ async def test_fcmaster_sim_serves_mitsubishi_drives_that_scan_finds() -> None:
     )  # fmt: skip
     try:
         assert sim.stdout is not None
-        async with asyncio.timeout(LIMIT_S):
+        async with asyncio.timeout(commissioning.LIMIT_S):
             name, path = (await sim.stdout.readline()).decode().split()
             assert name == "line1"
             scan = await asyncio.create_subprocess_exec(
