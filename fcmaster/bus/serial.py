@@ -1,8 +1,14 @@
-"""The serial transport: a local port or any pyserial URL, through pyserial-asyncio-fast.
+"""The serial transport: a local port or any pyserial URL.
 
-Bytes are delivered by the event loop's reader callback straight into a buffer, and a read
-waits on one future with one timer: no StreamReader, no per-read task, so the hot path
-costs one wake-up per chunk the kernel delivers.
+pyserial opens and configures the port (termios, RS-485 mode). A local port (a UART, a USB
+adapter, a pty) is then read and written on its file descriptor directly: the event loop's
+reader callback does one non-blocking ``os.read`` straight into a buffer, and a request is
+one ``os.write``. pyserial's own ``read`` and ``write`` would add a ``select()`` to each
+(they implement timeouts), and pyserial-asyncio's reader callback goes through them. Other
+URLs (``socket://``, ``rfc2217://``, …) have no such descriptor and go through
+pyserial-asyncio-fast. Either way a read waits on one future with one timer: no
+StreamReader, no per-read task, so the hot path costs one wake-up per chunk the kernel
+delivers.
 
 Pseudo-terminals refuse some termios changes a UART takes: once parity has been asked for,
 every later reconfiguration of the pty fails with EINVAL. A pty carries no parity bits
@@ -16,7 +22,7 @@ from __future__ import annotations
 import asyncio
 import os
 import termios
-from typing import Any
+from typing import Any, Protocol
 
 import serial
 import serial.rs485
@@ -60,6 +66,88 @@ class _Receiver(asyncio.Protocol):
             waiter.set_result(None)
 
 
+class _Port(Protocol):
+    """What the transport needs of an open port, whichever way it is driven."""
+
+    def write(self, data: bytes) -> None: ...
+    def is_closing(self) -> bool: ...
+    def close(self) -> None: ...
+
+
+class _FdPort:
+    """A local port driven on its file descriptor; pyserial only opened and configured it.
+
+    pyserial opens ports non-blocking, so reads and writes never stall the loop. A write
+    the kernel does not take whole (its output buffer is full) is finished by a writer
+    callback, in order.
+    """
+
+    def __init__(self, instance: serial.Serial, receiver: _Receiver) -> None:
+        self._instance = instance
+        self._receiver = receiver
+        self._fd = fd = instance.fileno()
+        self._loop = asyncio.get_running_loop()
+        self._unsent = b""
+        self._closing = False
+        self._loop.add_reader(fd, self._on_readable)
+
+    def _on_readable(self) -> None:
+        try:
+            data = os.read(self._fd, 4096)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:  # EIO and the like: the adapter is gone
+            self._lost(exc)
+            return
+        if data:
+            self._receiver.data_received(data)
+        else:  # readable but empty: the device went away
+            self._lost(ConnectionError(f"{self._instance.port} returned no data"))
+
+    def write(self, data: bytes) -> None:
+        if self._closing:
+            return
+        if self._unsent:
+            self._unsent += data
+            return
+        try:
+            written = os.write(self._fd, data)
+        except (BlockingIOError, InterruptedError):
+            written = 0
+        except OSError as exc:
+            self._lost(exc)
+            return
+        if written < len(data):
+            self._unsent = data[written:]
+            self._loop.add_writer(self._fd, self._on_writable)
+
+    def _on_writable(self) -> None:
+        try:
+            written = os.write(self._fd, self._unsent)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:
+            self._lost(exc)
+            return
+        self._unsent = self._unsent[written:]
+        if not self._unsent:
+            self._loop.remove_writer(self._fd)
+
+    def is_closing(self) -> bool:
+        return self._closing
+
+    def close(self) -> None:
+        if not self._closing:
+            self._closing = True
+            self._loop.remove_reader(self._fd)
+            self._loop.remove_writer(self._fd)
+            self._instance.close()
+
+    def _lost(self, exc: Exception) -> None:
+        self.close()
+        self._receiver.connection_lost(exc)
+
+
 def _expire(waiter: asyncio.Future[None]) -> None:
     if not waiter.done():
         waiter.set_result(None)
@@ -87,7 +175,7 @@ class SerialTransport:
         }
         self._rs485 = rs485
         self._receiver = _Receiver()
-        self._transport: asyncio.Transport | None = None
+        self._transport: _Port | None = None
 
     async def open(self) -> None:
         """Open the port (in a worker thread: opening can block on some adapters)."""
@@ -95,6 +183,7 @@ class SerialTransport:
             return
         loop = asyncio.get_running_loop()
         self._receiver = receiver = _Receiver()
+        transport: _Port
         try:
             if self.port.startswith("socket://"):
                 transport, _ = await serial_asyncio_fast.create_serial_connection(
@@ -102,9 +191,14 @@ class SerialTransport:
                 )
             else:
                 instance = await loop.run_in_executor(None, self._open_serial)
-                transport, _ = await serial_asyncio_fast.connection_for_serial(
-                    loop, lambda: receiver, instance
-                )
+                # A local POSIX port has a descriptor; URL handlers (spy://, loop://, …)
+                # are other classes, even where they subclass this one.
+                if os.name == "posix" and type(instance) is serial.Serial:
+                    transport = _FdPort(instance, receiver)
+                else:
+                    transport, _ = await serial_asyncio_fast.connection_for_serial(
+                        loop, lambda: receiver, instance
+                    )
         except (serial.SerialException, OSError, ValueError, termios.error) as exc:
             raise PortError(
                 f"cannot open {self.port}: {exc} (check the device path, and that this user "

@@ -12,7 +12,9 @@ Receiving: the event loop's reader callback hands each chunk to the line, stampe
 clock's ``now()``. Sending: one pump task sleeps on the clock until the line's next
 delivery time and writes what is due; a write that brings an earlier delivery (an echo, a
 noise burst) restarts the pump. Run under :func:`fcmaster.clock.new_event_loop`, whose
-timers keep sub-millisecond time, so replies leave close to their wire time.
+timers keep sub-millisecond time, with a :class:`~fcmaster.clock.MonotonicClock`, which
+wakes early by its own learned lateness and spins to the deadline, replies leave on their
+wire time to within microseconds; what remains is the pty's own delay.
 
 Parity and termios: a pty carries bytes, not characters, and Linux strips PARENB from its
 termios. glibc's ``tcsetattr`` reads the termios before and after the ``TCSETS`` ioctl and

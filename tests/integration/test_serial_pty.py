@@ -113,3 +113,64 @@ async def test_a_port_that_disappears_raises_port_error_on_read() -> None:
             await read_until_lost()
     finally:
         await transport.close()
+
+
+async def test_a_write_larger_than_the_kernel_takes_at_once_arrives_whole_and_in_order(
+    pty_pair: tuple[int, str],
+) -> None:
+    controller, path = pty_pair
+    transport = SerialTransport(path, baudrate=115200, parity="N")
+    await transport.open()
+    data = bytes(range(256)) * 1024  # far more than a pty buffers
+    os.set_blocking(controller, False)
+    try:
+        await transport.write(data[: len(data) // 2])
+        await transport.write(data[len(data) // 2 :])  # queued behind the unsent rest
+        received = bytearray()
+        async with asyncio.timeout(5):
+            while len(received) < len(data):
+                try:
+                    received += os.read(controller, 65536)
+                except BlockingIOError:
+                    await asyncio.sleep(0.001)
+        assert received == data
+    finally:
+        await transport.close()
+
+
+async def test_a_socket_url_goes_through_the_same_transport() -> None:
+    """Serial device servers (``socket://``) have no serial descriptor of their own."""
+    heard: asyncio.Queue[bytes] = asyncio.Queue()
+    served = asyncio.Event()
+
+    async def device_server(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            heard.put_nowait(await reader.readexactly(4))
+            writer.write(b"pong")
+            await writer.drain()
+            await reader.read()  # until the transport closes
+        finally:
+            writer.close()
+            with contextlib.suppress(ConnectionError):
+                await writer.wait_closed()
+            served.set()
+
+    server = await asyncio.start_server(device_server, "127.0.0.1", 0)
+    host, port = server.sockets[0].getsockname()[:2]
+    transport = SerialTransport(f"socket://{host}:{port}", baudrate=19200)
+    clock = MonotonicClock()
+    try:
+        async with asyncio.timeout(5):
+            await transport.open()
+            await transport.write(b"ping")
+            assert await heard.get() == b"ping"
+            got = b""
+            while len(got) < 4:
+                got += await transport.read(clock.now() + 1.0)
+        assert got == b"pong"
+    finally:
+        await transport.close()
+        async with asyncio.timeout(5):
+            await served.wait()  # the server's side is closed before the loop is
+        server.close()
+        await server.wait_closed()

@@ -1,0 +1,65 @@
+"""MonotonicClock and the precise event loop: waits never end before their deadline."""
+
+import asyncio
+import time
+
+import pytest
+
+from fcmaster.clock import MonotonicClock, new_event_loop
+
+# Around the spin threshold, a typical pause (2 characters at 115200 and at 19200 baud),
+# and past it: spun whole, slept and spun, slept.
+DELAYS_S = (0.0, 0.00002, MonotonicClock.SPIN_S, 0.00019, 0.0012, 0.005)
+
+
+async def _wake_ups(clock: MonotonicClock) -> list[tuple[float, float]]:
+    """(deadline, returned) for each delay, several times over so the clock learns."""
+    seen = []
+    for _ in range(5):
+        for delay in DELAYS_S:
+            deadline = clock.now() + delay
+            await clock.sleep_until(deadline)
+            seen.append((deadline, clock.now()))
+    return seen
+
+
+def test_waits_on_the_precise_loop_never_end_before_their_deadline() -> None:
+    with asyncio.Runner(loop_factory=new_event_loop) as runner:
+        seen = runner.run(_wake_ups(MonotonicClock()))
+    assert all(returned >= deadline for deadline, returned in seen)
+
+
+async def test_waits_on_the_default_loop_never_end_before_their_deadline() -> None:
+    seen = await _wake_ups(MonotonicClock())
+    assert all(returned >= deadline for deadline, returned in seen)
+
+
+async def test_sleep_waits_at_least_as_long_as_asked() -> None:
+    clock = MonotonicClock()
+    for seconds in (0.00005, 0.002):
+        started = time.monotonic()
+        await clock.sleep(seconds)
+        assert time.monotonic() - started >= seconds
+
+
+async def test_a_deadline_that_has_passed_returns_without_waiting_for_the_loop() -> None:
+    clock = MonotonicClock()
+    ran = False
+
+    async def other() -> None:
+        nonlocal ran
+        ran = True
+
+    task = asyncio.create_task(other())
+    await clock.sleep_until(clock.now() - 1.0)
+    assert not ran  # nothing else got a turn: the call did not yield
+    await task
+
+
+async def test_a_long_wait_can_be_cancelled() -> None:
+    clock = MonotonicClock()
+    sleeper = asyncio.create_task(clock.sleep(10.0))
+    await asyncio.sleep(0.001)
+    sleeper.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await sleeper
