@@ -84,7 +84,6 @@ import itertools
 import json
 import math
 import os
-import platform
 import random
 import resource
 import select
@@ -97,6 +96,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any, Final
 
+import results_file
 import serial
 
 from fcmaster import logsetup
@@ -923,13 +923,7 @@ def main(argv: list[str] | None = None) -> int:
     for line in verdicts(summary):
         print(f"  {line}")
     results = {
-        "benchmark": "bus",
-        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "python": sys.version.split()[0],
-        "platform": platform.platform(),
-        "fcmaster_commit": _git("rev-parse", "--short", "HEAD"),
-        "fcmaster_uncommitted": _git("status", "--porcelain", "--", ":/fcmaster").splitlines(),
-        "cpus": os.cpu_count(),
+        **results_file.provenance("bus"),
         "duration_s": duration_s,
         "warmup_s": WARMUP_S,
         "wall_s": now() - started,
@@ -942,32 +936,9 @@ def main(argv: list[str] | None = None) -> int:
         "summary": summary,
         "floors": floors,
     }
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps(_finite(results), indent=2, allow_nan=False) + "\n")
+    results_file.write(args.output, results)
     print(f"\n{len(rows)} runs in {now() - started:.0f} s; results in {args.output}")
     return 0
-
-
-def _git(*args: str) -> str:
-    """What git says about the tree the figures came from ("" outside a checkout)."""
-    try:
-        return subprocess.run(
-            ["git", *args], cwd=Path(__file__).resolve().parent, capture_output=True,
-            text=True, check=True, timeout=10,
-        ).stdout.strip()  # fmt: skip
-    except (OSError, subprocess.SubprocessError):
-        return ""
-
-
-def _finite(value: Any) -> Any:
-    """NaN (a figure with no samples) as null, so the file is strict JSON."""
-    if isinstance(value, float) and math.isnan(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
 
 
 if __name__ == "__main__":

@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import signal
 import socket
 import subprocess
@@ -34,6 +33,8 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 from typing import Any, Final
+
+import results_file
 
 DEFAULT_OUTPUT: Final = Path(__file__).resolve().parent / "results" / "daemon_footprint.json"
 START_S: Final = 60.0  # the demo must show its drives within this
@@ -193,21 +194,14 @@ def main() -> int:
     figures = measure(args.duration, args.interval)
     load_after = os.getloadavg()
     results = {
-        "benchmark": "daemon_footprint",
-        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "python": platform.python_version(),
-        "platform": platform.platform(),
-        "fcmaster_commit": _git("rev-parse", "--short", "HEAD"),
-        "fcmaster_uncommitted": _git("status", "--porcelain", "--", ":/fcmaster").splitlines(),
-        "cpus": os.cpu_count(),
+        **results_file.provenance("daemon_footprint"),
         "load_average_before": load_before,
         "load_average_after": load_after,
         "uptime": _uptime(),
         "fleet": "the demo (fcmaster/demo.yaml): 2 simulated lines in-process, 10 drives, HTTP",
         **figures,
     }
-    args.output.parent.mkdir(parents=True, exist_ok=True)
-    args.output.write_text(json.dumps(_finite(results), indent=2, allow_nan=False) + "\n")
+    results_file.write(args.output, results)
 
     r, c = figures["rss_mib"], figures["cpu"]
     print(
@@ -233,28 +227,6 @@ def _uptime() -> str:
         ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return ""
-
-
-def _git(*args: str) -> str:
-    """What git says about the tree the figures came from ("" outside a checkout)."""
-    try:
-        return subprocess.run(
-            ["git", *args], cwd=Path(__file__).resolve().parent, capture_output=True,
-            text=True, check=True, timeout=10,
-        ).stdout.strip()  # fmt: skip
-    except (OSError, subprocess.SubprocessError):
-        return ""
-
-
-def _finite(value: Any) -> Any:
-    """NaN (a figure with no samples) as null, so the file is strict JSON."""
-    if isinstance(value, float) and value != value:
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
 
 
 if __name__ == "__main__":
