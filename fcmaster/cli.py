@@ -47,7 +47,32 @@ def _line_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stopbits", type=int, choices=(1, 2))
     parser.add_argument("--address-format", type=int, choices=(31, 126), default=126)
     parser.add_argument("--timeout", type=float, help="reply deadline in seconds")
+    parser.add_argument(
+        "--terminator", choices=("none", "cr", "crlf"), default="cr",
+        help="mitsubishi: as the drives' Pr.124 (default cr)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--wait-time-ms",
+        type=_wait_time,
+        default=0,
+        metavar="MS|none",
+        help="mitsubishi: the waiting time each request carries, 0-150 in steps of 10 "
+        "(default 0); none when the drives' Pr.123 sets it",
+    )
     _encoding_options(parser)
+
+
+def _wait_time(text: str) -> int | None:
+    """``--wait-time-ms``: 0-150 in steps of 10, or ``none`` (left out of requests)."""
+    if text.lower() in ("none", "null"):
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 150 or value % 10:
+        raise argparse.ArgumentTypeError(f"{text!r} is not 0-150 in steps of 10, or none")
+    return value
 
 
 def _encoding_options(parser: argparse.ArgumentParser) -> None:
@@ -185,6 +210,8 @@ def _options(args: argparse.Namespace) -> Any:
         stopbits=args.stopbits,
         address_format=args.address_format,
         timeout_s=args.timeout,
+        terminator=args.terminator,
+        wait_time_ms=args.wait_time_ms,
         address_encoding=args.address_encoding,
         response_encoding=args.response_encoding,
         fault_encoding=args.fault_encoding,

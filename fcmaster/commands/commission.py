@@ -43,6 +43,8 @@ class LineOptions:
     stopbits: int | None = None
     address_format: int = 126
     timeout_s: float | None = None
+    terminator: str = "cr"  # mitsubishi only, as the line's config keys
+    wait_time_ms: int | None = 0
     address_encoding: str = "hex"  # enc only, as the line's config keys
     response_encoding: str = "hex"
     fault_encoding: str = "hex"
@@ -59,6 +61,8 @@ class LineOptions:
             stopbits=self.stopbits or stopbits,
             address_format=self.address_format,
             timeout_s=self.timeout_s,
+            terminator=self.terminator,
+            wait_time_ms=self.wait_time_ms,
             address_encoding=self.address_encoding,
             response_encoding=self.response_encoding,
             fault_encoding=self.fault_encoding,

@@ -140,3 +140,31 @@ async def test_fcmaster_sim_serves_mitsubishi_drives_that_scan_finds() -> None:
         if sim.returncode is None:
             sim.terminate()
         await asyncio.wait_for(sim.wait(), 10)
+
+
+async def test_line_options_follow_drives_set_to_cr_lf_and_their_own_waiting_time() -> None:
+    # Pr.124 = 2: frames end CR LF; Pr.123 = 20: the drive keeps its own waiting time, so
+    # requests leave the waiting-time digit out.
+    own = DriveSettings(parameters={"Pr.124": 2.0, "Pr.123": 20.0})
+    line = LineSettings(protocol="mitsubishi", baudrate=19200, parity="E", stopbits=2)
+    async with commissioning.served(line, [(4, own)]) as server:
+        sim = drive(server, 4)
+        heard: list[bytes] = []
+        answer = sim.handle
+
+        def recording(frame: bytes, now: float) -> bytes | None:
+            heard.append(frame)
+            return answer(frame, now)
+
+        sim.handle = recording  # type: ignore[method-assign]
+        options = ("--address", "4", "--json", "--terminator", "crlf", "--wait-time-ms", "none")
+        code, out, err = await fcmaster(server, "status", *options)
+        assert code == 0, err
+        assert json.loads(out)["address"] == 4
+        # ENQ, station 04, instruction 7A, no waiting digit, the sum, CR LF
+        status_request = b"\x05047A" + b"%02X" % (sum(b"047A") & 0xFF) + b"\r\n"
+        assert status_request in heard
+
+        code, _, err = await fcmaster(server, "status", "--address", "4", "--wait-time-ms", "15")
+        assert code == 2
+        assert "steps of 10" in err
