@@ -63,3 +63,33 @@ async def test_a_long_wait_can_be_cancelled() -> None:
     sleeper.cancel()
     with pytest.raises(asyncio.CancelledError):
         await sleeper
+
+
+class _FakeTime:
+    """Stands in for ``time`` and ``asyncio`` inside fcmaster.clock: sleeps end on time."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+        self.sleeps: list[float] = []
+
+    def monotonic(self) -> float:
+        return self.now
+
+    async def sleep(self, seconds: float) -> None:
+        self.sleeps.append(seconds)
+        self.now += seconds
+
+
+async def test_a_long_wait_ends_with_a_short_sleep(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The kernel wakes a 10 ms sleep later than the lead can cover (a Mitsubishi
+    # turnaround): the sleep that lands on the deadline must be a short one.
+    fake = _FakeTime()
+    monkeypatch.setattr("fcmaster.clock.time", fake)
+    monkeypatch.setattr("fcmaster.clock.asyncio", fake)
+    clock = MonotonicClock()
+    deadline = fake.now + 0.010
+    await clock.sleep_until(deadline)
+    assert fake.now >= deadline
+    assert len(fake.sleeps) == 2
+    assert fake.sleeps[-1] <= 0.001 + 1e-9
+    assert sum(fake.sleeps) == pytest.approx(0.010)
