@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import dataclasses
 import os
 import subprocess
 import sys
@@ -47,7 +46,7 @@ from typing import Any, Final
 import results_file
 
 from fcmaster import logsetup
-from fcmaster.bus.codecs import codec_for, response_delay_s
+from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
@@ -104,8 +103,7 @@ class Case:
             drives=tuple(DrivePlan(name=f"d{a}", address=a)
                          for a in range(first, first + self.drives)),
         )  # fmt: skip
-        delay_s = response_delay_s(plan)
-        return plan if delay_s is None else dataclasses.replace(plan, response_delay_s=delay_s)
+        return with_protocol_delay(plan)
 
     def transaction_s(self) -> float:
         """T: the mean ideal time of one idle poll over the rotation (module docstring)."""

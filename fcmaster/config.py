@@ -15,7 +15,6 @@ dataclasses; nothing below ``service`` ever sees pydantic.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import re
 from dataclasses import dataclass
@@ -26,7 +25,7 @@ from urllib.parse import urlsplit
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from fcmaster.bus.codecs import codec_for, response_delay_s
+from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.protocol.codec import DriveCodec
@@ -366,12 +365,11 @@ def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
         fault_encoding=bus.fault_encoding,
         drives=drives,
     )
-    protocol_delay_s = response_delay_s(plan)
-    if protocol_delay_s is not None and "response_delay_ms" not in bus.model_fields_set:
-        # The protocol says how long its drives may take (Mitsubishi: the waiting time plus
-        # the data check), and the reply deadline is derived from it.
-        plan = dataclasses.replace(plan, response_delay_s=protocol_delay_s)
-    return plan
+    if "response_delay_ms" in bus.model_fields_set:
+        return plan
+    # Where the protocol says how long its drives may take (Mitsubishi: the waiting time
+    # plus the data check), the reply deadline is derived from it.
+    return with_protocol_delay(plan)
 
 
 def _unique(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from fcmaster.bus.plan import LinePlan
 from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import DriveCodec
@@ -35,13 +37,13 @@ def codec_for(plan: LinePlan) -> DriveCodec:
     raise UsageError(f"protocol {plan.protocol!r} is not supported")
 
 
-def response_delay_s(plan: LinePlan) -> float | None:
-    """How long the protocol lets a drive take before it starts its reply, at worst.
+def with_protocol_delay(plan: LinePlan) -> LinePlan:
+    """``plan`` with the response delay its protocol fixes, where it fixes one.
 
-    None: the protocol does not fix it (an FC drive's is its own setting, 8-35).
-    Mitsubishi drives wait the waiting time, then check the data (up to 30 ms for a
-    parameter), so the reply deadline must allow for both.
+    An FC drive's delay is its own setting (8-35), so an FC plan stays as it is. Mitsubishi
+    drives wait the waiting time, then check the data (up to 30 ms for a parameter), so the
+    reply deadline must allow for both.
     """
     if plan.protocol == "mitsubishi":
-        return answer_delay_s(plan.wait_time_ms)
-    return None
+        return replace(plan, response_delay_s=answer_delay_s(plan.wait_time_ms))
+    return plan

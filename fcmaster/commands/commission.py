@@ -13,7 +13,7 @@ import sys
 from dataclasses import dataclass, replace
 from typing import Any
 
-from fcmaster.bus.codecs import codec_for, response_delay_s
+from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.link import Link
 from fcmaster.bus.plan import DrivePlan, LinePlan
@@ -69,8 +69,7 @@ class LineOptions:
             retries=1,
             drives=drives,
         )
-        delay_s = response_delay_s(plan)  # Mitsubishi: waiting time and data check time
-        return plan if delay_s is None else replace(plan, response_delay_s=delay_s)
+        return with_protocol_delay(plan)  # Mitsubishi: waiting time and data check time
 
 
 class _Session:

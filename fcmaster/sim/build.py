@@ -10,6 +10,7 @@ from __future__ import annotations
 import random
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from functools import partial
 from typing import Final
 
 from fcmaster.bus.plan import LinePlan
@@ -30,12 +31,12 @@ DriveFactory = Callable[[int, DriveSettings, LineSettings, float], SimDrive]
 class SimProtocol:
     """What the simulator needs of one protocol."""
 
-    framer_factory: Callable[[], RequestFramer]
+    # The framer that cuts requests out of the bytes, for a line of drives with these
+    # settings (they matter where the request format is a drive setting: Mitsubishi's
+    # Pr.123 and Pr.124).
+    framer_for: Callable[[list[DriveSettings]], RequestFramer]
     new_drive: DriveFactory
     addresses: range  # addresses a drive may have
-    # When the request format is a drive setting (Mitsubishi: Pr.123, Pr.124), the framer
-    # for a line of drives with these settings; framer_factory is not used then.
-    framer_for: Callable[[list[DriveSettings]], RequestFramer] | None = None
     # Drive settings a bus's config implies (Mitsubishi: Pr.124 from its terminator).
     line_parameters: Callable[[LinePlan], dict[str, float]] | None = None
     # The drives time each reply themselves (Mitsubishi: the request's waiting time), so
@@ -58,15 +59,14 @@ def _enc_drive(address: int, settings: DriveSettings, line: LineSettings, now: f
 
 
 SIM_PROTOCOLS: Final[dict[str, SimProtocol]] = {
-    "danfoss-fc": SimProtocol(FcFramer, _fc_drive, range(1, 127)),
+    "danfoss-fc": SimProtocol(lambda _: FcFramer(), _fc_drive, range(1, 127)),
     # 0 and 127 (broadcast) cannot name one drive; F2.15 allows them, the master does not
-    "enc": SimProtocol(EncRequestFramer, _enc_drive, range(1, 127)),
+    "enc": SimProtocol(lambda _: EncRequestFramer(), _enc_drive, range(1, 127)),
     # stations 0-31; the link has no broadcast, so 0 is a drive like the others
     "mitsubishi": SimProtocol(
         line_receiver,
         _mitsubishi_drive,
         range(0, 32),
-        framer_for=line_receiver,
         line_parameters=line_parameters,
         own_timing=True,
     ),
@@ -99,13 +99,9 @@ def build_line(
     if repeated:
         raise UsageError(f"addresses {repeated} appear more than once on line {line.name}")
     now = clock.now()
-    framer_factory = protocol.framer_factory
-    if protocol.framer_for is not None:
-        framer = protocol.framer_for([settings for _, settings in drives])
-        framer_factory = lambda: framer  # noqa: E731 - the line asks for its one framer
     return SimLine(
         drives=[protocol.new_drive(address, settings, line, now) for address, settings in drives],
-        framer_factory=framer_factory,
+        framer_factory=partial(protocol.framer_for, [settings for _, settings in drives]),
         baudrate=line.baudrate,
         char_bits=line.char_bits,
         clock=clock,

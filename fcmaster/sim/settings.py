@@ -10,10 +10,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Final
 
 from fcmaster.errors import UsageError
 from fcmaster.sim.faults import FaultPlan
-from fcmaster.sim.motor import MotorRating
+from fcmaster.sim.motor import Motor, MotorRating
+
+SPIN_UP_S: Final = 120.0  # how long before power-up a drive found running was started
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -31,6 +34,27 @@ class DriveSettings:
     local: bool = False  # in local (hand) operation: ignores bus commands
     running_hz: float | None = None  # already running at power-up, as a former master left it
     warning_cycle: tuple[int, float, float] | None = None  # (warning number, every_s, for_s)
+
+    def started_at(self, now: float) -> float:
+        """When the motor was started, for a drive powered up at ``now``.
+
+        A drive found running (``running_hz``) was started long before, so it is already at
+        speed when the master first sees it.
+        """
+        return now - SPIN_UP_S if self.running_hz else now
+
+    def motor(self, started: float, rating: MotorRating | None = None) -> Motor:
+        """The drive's motor and load (``rating`` where the vendor derives its own)."""
+        return Motor(
+            rating or self.rating, started, load=self.load, load_exponent=self.load_exponent
+        )
+
+    def warning_showing(self, since_power_up_s: float) -> bool:
+        """Whether the recurring warning (``warning_cycle``) shows at this age (False: none)."""
+        if self.warning_cycle is None:
+            return False
+        _, every_s, for_s = self.warning_cycle
+        return since_power_up_s % every_s < for_s
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)

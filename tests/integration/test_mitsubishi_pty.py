@@ -6,11 +6,10 @@ is set up the way the config does it: ``codec_for`` and the protocol's answer de
 """
 
 import asyncio
-import dataclasses
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
-from fcmaster.bus.codecs import codec_for, response_delay_s
+from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.commands import Outcome
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
@@ -50,9 +49,7 @@ async def line_with_master(
             name="pty", port=server.device, protocol="mitsubishi", baudrate=38400, stopbits=2,
             drives=drives, offline_after=5, probe_interval_s=0.5,
         )  # fmt: skip
-        delay_s = response_delay_s(plan)
-        assert delay_s is not None
-        plan = dataclasses.replace(plan, response_delay_s=delay_s)
+        plan = with_protocol_delay(plan)  # as the config derives it
         transport = SerialTransport(plan.port, baudrate=38400, parity="E", stopbits=2)
         codec = codec_for(plan)
         async with BusMaster(plan, codec=codec, transport=transport, clock=clock) as master:

@@ -139,7 +139,7 @@ class FcCodec:
         """A process telegram, or a parameter telegram reading ``read``."""
         if read is None:
             return self.control(address, intent)[0]
-        return self.read(address, read, 0, intent)[0]
+        return self._read(address, read, 0, intent)
 
     def control(self, address: int, intent: ControlIntent | None) -> tuple[Exchange, ...]:
         """One process telegram with the control word and reference of ``intent``."""
@@ -158,13 +158,19 @@ class FcCodec:
         self, address: int, parameter: ParameterKey, index: int, intent: ControlIntent | None
     ) -> tuple[Exchange, ...]:
         """AK 1 (or AK F for a text parameter) with the given IND: one telegram."""
+        return (self._read(address, parameter, index, intent),)
+
+    def _read(
+        self, address: int, parameter: ParameterKey, index: int, intent: ControlIntent | None
+    ) -> Exchange:
+        # The one read telegram, also what an idle poll sends (no tuple on the hot path).
         spec = lookup(parameter.code)
         _check_index(spec, index)
         if spec.is_text:
             ak, ind, reply_length = RequestAk.TEXT, IND_TEXT_READ | index, _TEXT_REPLY_LENGTH
         else:
             ak, ind, reply_length = RequestAk.READ, index, PARAMETER_LENGTH
-        return (self._parameter(address, ak, parameter, ind, 0, intent, Access.READ, reply_length),)
+        return self._parameter(address, ak, parameter, ind, 0, intent, Access.READ, reply_length)
 
     def write(
         self,

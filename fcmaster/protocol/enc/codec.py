@@ -160,7 +160,7 @@ class EncCodec:
                 address=self._address(address), command=Command.READ_VALUE, cmd_index=0x0F
             )
             return self._exchange(address, request)
-        return self.read(address, read, 0, intent)[0]
+        return self._read(address, read)
 
     def control(self, address: int, intent: ControlIntent) -> tuple[Exchange, ...]:
         """The run-control frames of ``intent``, in order (table in the module docstring)."""
@@ -199,6 +199,10 @@ class EncCodec:
     ) -> tuple[Exchange, ...]:
         """Command 10, 11, 13 or 15 by the key; ``intent`` does not ride along (§4)."""
         _check_index(index)
+        return (self._read(address, parameter),)
+
+    def _read(self, address: int, parameter: ParameterKey) -> Exchange:
+        # The one read frame, also what an idle poll sends (no tuple on the hot path).
         command, item = split_code(parameter.code)
         request = Request(
             address=self._address(address),
@@ -206,7 +210,7 @@ class EncCodec:
             aux_index=item >> 8,
             cmd_index=item & 0xFF,
         )
-        return (self._exchange(address, request, access=Access.READ, parameter=parameter),)
+        return self._exchange(address, request, access=Access.READ, parameter=parameter)
 
     def write(
         self,

@@ -73,7 +73,6 @@ _BOUNDS: Final[dict[DataType | None, tuple[int, int]]] = {
 }
 
 
-_SPIN_UP_S: Final = 120.0  # how long before power-up a drive found running was started
 _RUNNING_WORD: Final = 0x047C  # start, ramp 1, data valid (§8.3)
 
 
@@ -123,17 +122,15 @@ class FcSimDrive:
         overrides.update(overrides_from_values(settings.parameters))
         self.parameters = ParameterStore(overrides)
         # A drive found running was started a while ago; let its motor reach speed since.
-        started = now - _SPIN_UP_S if settings.running_hz else now
-        self.motor = Motor(
-            self._rating(rating), started, load=settings.load, load_exponent=settings.load_exponent
-        )
+        started = settings.started_at(now)
+        self.motor = settings.motor(started, self._rating(rating))
         self.control = FcControl(self.parameters, self.motor, started, local=settings.local)
         if settings.running_hz:
             reference = settings.running_hz / (self.parameters[303] / 1000.0) * 100.0
             self.control.apply(_RUNNING_WORD, encode_reference(reference), started)
             self.control.advance(now)
         self.texts = identification_texts(address, rating)
-        self._warning_cycle = settings.warning_cycle
+        self._settings = settings
         self._born = now
 
     @property
@@ -158,7 +155,7 @@ class FcSimDrive:
             request = decode_telegram(frame, from_drive=False)
         except ProtocolError:
             return None
-        if self._warning_cycle is not None:
+        if self._settings.warning_cycle is not None:
             self._cycle_warning(now)
         self.control.apply(request.pcd1, request.pcd2, now)
         pke, ind, pwe, text = self._parameter_channel(request, now)
@@ -173,9 +170,9 @@ class FcSimDrive:
 
     def _cycle_warning(self, now: float) -> None:
         """A recurring warning: active for ``for_s`` at the start of every ``every_s``."""
-        assert self._warning_cycle is not None
-        number, every_s, for_s = self._warning_cycle
-        if (now - self._born) % every_s < for_s:
+        assert self._settings.warning_cycle is not None
+        number = self._settings.warning_cycle[0]
+        if self._settings.warning_showing(now - self._born):
             self.control.raise_warning(number, now)
         else:
             self.control.clear_warning(number, now)

@@ -66,7 +66,6 @@ from fcmaster.sim.motor import Motor
 from fcmaster.sim.settings import DriveSettings, LineSettings
 
 SOFTWARE_VERSION: Final = 0x0100  # what command 15 reports (1.00; not from a manual)
-_SPIN_UP_S: Final = 120.0  # how long before power-up a drive found running was started
 _KEYPAD: Final = 0  # F0.02 option for local operation
 _RUN_CONTROL_INDEXES: Final = frozenset(int(index) for index in RunControl)
 _COMMANDS: Final = frozenset(int(command) for command in Command)
@@ -130,16 +129,14 @@ class EncSimDrive:
         upper = settings.max_frequency_hz or settings.rating.frequency_hz
         self.parameters = ParameterStore(overrides, upper_limit_hz=upper)
         # A drive found running was started a while ago; let its motor reach speed since.
-        started = now - _SPIN_UP_S if settings.running_hz else now
-        self.motor = Motor(
-            settings.rating, started, load=settings.load, load_exponent=settings.load_exponent
-        )
+        started = settings.started_at(now)
+        self.motor = settings.motor(started)
         self.control = EncControl(self.parameters, self.motor, started)
         if settings.running_hz:
             self.control.running = True
             self.control.refresh(started)
             self.control.advance(now)
-        self._warning_cycle = settings.warning_cycle
+        self._settings = settings
         self._born = now
         self._field_for = -1  # the address self._field was worked out for
         self._field: int | None = None
@@ -169,7 +166,7 @@ class EncSimDrive:
         broadcast = field == BROADCAST
         if not broadcast and field != self._address_field():
             return None
-        if self._warning_cycle is not None:
+        if self._settings.warning_cycle is not None:
             self._cycle_warning(now)
         try:
             request = self._checked(frame)
@@ -271,6 +268,4 @@ class EncSimDrive:
 
         The state word has no other warning, so the cycle's number is not used.
         """
-        assert self._warning_cycle is not None
-        _, every_s, for_s = self._warning_cycle
-        self.control.undervoltage = (now - self._born) % every_s < for_s
+        self.control.undervoltage = self._settings.warning_showing(now - self._born)

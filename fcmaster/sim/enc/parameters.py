@@ -132,9 +132,6 @@ class ParameterStore:
             except Refused as exc:
                 raise UsageError(f"function code {name(index)} = {raw}: {exc}") from None
 
-    def __contains__(self, index: int) -> bool:
-        return index in self._values
-
     def __getitem__(self, index: int) -> int:
         return self._values[index]
 

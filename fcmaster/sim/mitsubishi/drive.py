@@ -64,7 +64,6 @@ from fcmaster.sim.mitsubishi.parameters import (
     overrides_from_values,
 )
 from fcmaster.sim.mitsubishi.receiver import RequestReceiver
-from fcmaster.sim.motor import Motor
 from fcmaster.sim.settings import DriveSettings, LineSettings
 
 DEFAULT_CHECK_S: Final = 0.005  # data check time of a monitor read or a RAM write
@@ -75,7 +74,6 @@ PROTOCOL_ERROR: Final = 0x3
 SUM_ERROR: Final = 0x2
 CHARACTER_ERROR: Final = 0x7
 COMPUTER_NAK: Final = 0x0
-_SPIN_UP_S: Final = 120.0  # how long before power-up a drive found running was started
 _TWO_DIGITS: Final = frozenset((0xFA, 0xF3, 0xFF, 0xEC))
 _TERMINATORS: Final = (Terminator.NONE, Terminator.CR, Terminator.CRLF)  # Pr.124 = 0, 1, 2
 _BAUD: Final = (4800, 9600, 19200, 38400)  # Pr.118 × 100
@@ -116,10 +114,8 @@ class MitsubishiSimDrive:
         self._check_s = (
             DEFAULT_CHECK_S if settings.response_delay_s is None else settings.response_delay_s
         )
-        started = now - _SPIN_UP_S if settings.running_hz else now
-        self.motor = Motor(
-            settings.rating, started, load=settings.load, load_exponent=settings.load_exponent
-        )
+        started = settings.started_at(now)
+        self.motor = settings.motor(started)
         self.control = MitsubishiControl(self.parameters, self.motor, started, local=settings.local)
         self._page = 0
         self._second = 0  # HEC: second parameter changing
@@ -127,7 +123,7 @@ class MitsubishiSimDrive:
         self._errors = 0  # consecutive reception errors (codes 0-5)
         self._deaf_until = now
         self._delay_s = self._check_s
-        self._warning_cycle = settings.warning_cycle
+        self._settings = settings
         self._born = now
         self._take_line_settings()
         if settings.running_hz:
@@ -150,22 +146,11 @@ class MitsubishiSimDrive:
         """When the drive hears requests again after its last reset (past: it hears now)."""
         return self._deaf_until
 
-    @property
-    def terminator(self) -> Terminator:
-        """What ends every frame (Pr.124 as of the last power-up or reset)."""
-        return self._terminator
-
-    @property
-    def wait_digit(self) -> bool:
-        """Whether requests carry the waiting-time digit (Pr.123 = 9999)."""
-        return self._wait_ms is None
-
     def advance(self, now: float) -> None:
         """Bring ramps and the communication check up to ``now``."""
         self.control.advance(now)
-        if self._warning_cycle is not None:
-            _, every_s, for_s = self._warning_cycle
-            self.control.warning = (now - self._born) % every_s < for_s
+        if self._settings.warning_cycle is not None:
+            self.control.warning = self._settings.warning_showing(now - self._born)
 
     def handle(self, frame: bytes, now: float) -> bytes | None:
         """Act on a request candidate that ended at ``now``; return the reply, or None."""
@@ -230,10 +215,10 @@ class MitsubishiSimDrive:
 
     def _serve(self, code: int, data: int | None, now: float) -> bytes | None:
         if data is None:
-            return self._read(code, now)
+            return self._read(code)
         return self._write(code, data, now)
 
-    def _read(self, code: int, now: float) -> bytes:
+    def _read(self, code: int) -> bytes:
         control, motor = self.control, self.motor
         if code <= 0x63:
             return self._data(self.parameters[self._parameter(code)], 4)
@@ -270,7 +255,7 @@ class MitsubishiSimDrive:
             self._write_parameter(self._parameter(code - 0x80), data, now)
         elif code in (0xED, 0xEE):
             self._network_only()
-            highest = self.parameters.value(1 if self.parameters.value(1) <= 120 else 18)
+            highest = self.parameters.value(1)  # Pr.1, the maximum frequency
             if data * 0.01 > highest + 1e-9:
                 raise _Refused(DATA_RANGE_ERROR)
             control.set_frequency(data * 0.01, now, eeprom=code == 0xEE)
@@ -401,14 +386,14 @@ def _fit(value: float) -> int:
     return min(max(round(value), 0), 0xFFFF)
 
 
-def line_receiver(drives: list[DriveSettings] | None = None) -> RequestReceiver:
+def line_receiver(drives: list[DriveSettings]) -> RequestReceiver:
     """The one receiver of a line whose drives have ``drives``' settings.
 
     UsageError when they disagree on Pr.123 (9999 or not) or Pr.124: one receiver stands
     for every drive on the line, as the protocol document asks of a line anyway (§1.1).
     """
     seen: set[tuple[Terminator, bool]] = set()
-    for settings in drives or (DriveSettings(),):
+    for settings in drives or [DriveSettings()]:
         store = ParameterStore(overrides_from_values(settings.parameters))
         seen.add((_TERMINATORS[store[124]], store[123] == SETTING_9999))
     if len(seen) > 1:

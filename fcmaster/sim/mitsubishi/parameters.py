@@ -60,7 +60,6 @@ def _s(number: int, default: int, low: int, high: int, **kwargs: bool) -> Settin
     return Setting(number=number, default=default, low=low, high=high, **kwargs)
 
 
-NINE = SETTING_9999
 # raw values: Pr.1 12000 = 120.00 Hz, Pr.7 50 = 5.0 s, Pr.122 in 0.1 s, …
 SETTINGS: Final[dict[int, Setting]] = {
     s.number: s
@@ -88,8 +87,8 @@ SETTINGS: Final[dict[int, Setting]] = {
         _s(119, 1, 0, 11),
         _s(120, 2, 0, 2),
         _s(121, 1, 0, 10, with_9999=True),
-        _s(122, NINE, 0, 9998, with_9999=True),  # 0.1 s; 9999 = no check (sim factory)
-        _s(123, NINE, 0, 150, with_9999=True),  # ms; 9999 = the digit travels in requests
+        _s(122, SETTING_9999, 0, 9998, with_9999=True),  # 0.1 s; 9999 = no check (sim factory)
+        _s(123, SETTING_9999, 0, 150, with_9999=True),  # ms; 9999 = the digit travels in requests
         _s(124, 1, 0, 2),
         _s(338, 0, 0, 1),
         _s(339, 0, 0, 2),
@@ -116,9 +115,6 @@ class ParameterStore:
 
     def __getitem__(self, number: int) -> int:
         return self._values[number]
-
-    def __contains__(self, number: object) -> bool:
-        return number in self._values
 
     def set(self, number: int, raw: int) -> None:
         """Store a checked value."""

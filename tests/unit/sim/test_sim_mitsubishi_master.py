@@ -7,11 +7,9 @@ drive's own communication check tripping it once the master goes away.
 
 from __future__ import annotations
 
-import dataclasses
-
 import pytest
 
-from fcmaster.bus.codecs import codec_for, response_delay_s
+from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.commands import Outcome
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
@@ -42,9 +40,7 @@ def master_on_sim(
         [(0, settings), (5, settings)],
         clock=clock,
     )
-    delay = response_delay_s(PLAN)
-    assert delay is not None
-    plan = dataclasses.replace(PLAN, response_delay_s=delay)  # as the config derives it
+    plan = with_protocol_delay(PLAN)  # as the config derives it
     master = BusMaster(
         plan, codec=codec_for(plan), transport=SimTransport(line, clock), clock=clock
     )
