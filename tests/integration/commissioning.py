@@ -5,12 +5,15 @@ event loop."""
 from __future__ import annotations
 
 import asyncio
+import json
 import sys
-from collections.abc import AsyncIterator, Iterable
+from collections.abc import AsyncIterator, Iterable, Sequence
 from contextlib import asynccontextmanager
+from pathlib import Path
 
 from fcmaster.clock import MonotonicClock
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
+from tests.integration.daemon_harness import child
 
 LIMIT_S = 60.0  # one test's whole budget: a cold interpreter per command on a busy machine
 
@@ -36,3 +39,22 @@ async def fcmaster(server: PtyServer, protocol: str, *args: str) -> tuple[int, s
     out, err = await process.communicate()
     assert process.returncode is not None
     return process.returncode, out.decode(), err.decode()
+
+
+async def scan_a_served_sim(
+    tmp: Path, sim_args: Sequence[str], scan_args: Sequence[str]
+) -> tuple[str, list[int]]:
+    """``fcmaster sim SIM_ARGS`` in its own process, and ``fcmaster scan`` on its pty.
+
+    The bus name the simulator printed, and the addresses the scan found (its stderr is
+    logged to ``tmp``, so a chatty simulator never stalls on a full pipe).
+    """
+    async with asyncio.timeout(LIMIT_S), child("sim", *sim_args, log=tmp / "sim.log") as sim:
+        name, path = (await sim.readline()).split()
+        scan = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "fcmaster", "scan", "--port", path, *scan_args, "--json",
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+        out, err = await scan.communicate()
+    assert scan.returncode == 0, err.decode()
+    return name, [entry["address"] for entry in json.loads(out)]

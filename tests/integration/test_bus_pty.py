@@ -6,7 +6,7 @@ slower than a real line but changes no behaviour.
 """
 
 import asyncio
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fcmaster.bus.commands import Outcome
@@ -20,6 +20,7 @@ from fcmaster.sim.danfoss_fc.drive import FcSimDrive
 from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
+from tests.integration.waiting import wait_for
 
 LIMIT_S = 30.0
 ADDRESSES = (1, 2, 3, 4)
@@ -56,13 +57,6 @@ async def line_with_master(
         transport = SerialTransport(plan.port, baudrate=baudrate, parity=plan.parity)
         async with BusMaster(plan, codec=FcCodec(), transport=transport, clock=clock) as master:
             yield server, master
-
-
-async def wait_for(condition: Callable[[], object], timeout_s: float = 10.0) -> None:
-    """Poll ``condition`` (state of the master and the simulator, which signal nothing)."""
-    async with asyncio.timeout(timeout_s):
-        while not condition():  # noqa: ASYNC110 - nothing to wait on but the state itself
-            await asyncio.sleep(0.02)
 
 
 async def test_every_drive_is_polled_and_a_command_turns_the_motor() -> None:

@@ -7,10 +7,9 @@ against a real line.
 
 from __future__ import annotations
 
-import asyncio
 import json
-import sys
 from contextlib import AbstractAsyncContextManager
+from pathlib import Path
 
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer
 from fcmaster.sim.enc import EncSimDrive
@@ -94,7 +93,9 @@ async def test_control_starts_stops_and_emergency_stops_a_drive() -> None:
         assert code == 0
         assert not sim.control.running
 
-        await fcmaster(server, "control", *args, "start", "--frequency", "30")
+        code, _, err = await fcmaster(server, "control", *args, "start", "--frequency", "30")
+        assert code == 0, err
+        assert sim.control.running
         code, _, _ = await fcmaster(server, "control", *args, "quick-stop")
         assert code == 0
         assert sim.control.emergency
@@ -107,26 +108,12 @@ async def test_control_starts_stops_and_emergency_stops_a_drive() -> None:
         assert not sim.control.running
 
 
-async def test_fcmaster_sim_serves_enc_drives_that_scan_finds() -> None:
-    sim = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "fcmaster", "sim", "--protocol", "enc", "--addresses", "3-4",
-        "--baudrate", "9600", "--parity", "N", "--fault-encoding", "decimal",
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+async def test_fcmaster_sim_serves_enc_drives_that_scan_finds(tmp_path: Path) -> None:
+    name, found = await commissioning.scan_a_served_sim(
+        tmp_path,
+        ("--protocol", "enc", "--addresses", "3-4", "--baudrate", "9600",
+         "--parity", "N", "--fault-encoding", "decimal"),
+        ("--protocol", "enc", "--addresses", "1-5", "--fault-encoding", "decimal"),
     )  # fmt: skip
-    try:
-        assert sim.stdout is not None
-        async with asyncio.timeout(commissioning.LIMIT_S):
-            name, path = (await sim.stdout.readline()).decode().split()
-            assert name == "line1"
-            scan = await asyncio.create_subprocess_exec(
-                sys.executable, "-m", "fcmaster", "scan", "--port", path, "--protocol", "enc",
-                "--addresses", "1-5", "--fault-encoding", "decimal", "--json",
-                stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-            )  # fmt: skip
-            out, err = await scan.communicate()
-        assert scan.returncode == 0, err.decode()
-        assert [entry["address"] for entry in json.loads(out)] == [3, 4]
-    finally:
-        if sim.returncode is None:
-            sim.terminate()
-        await asyncio.wait_for(sim.wait(), 10)
+    assert name == "line1"
+    assert found == [3, 4]

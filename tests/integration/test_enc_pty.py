@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -26,6 +26,7 @@ from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.state import FleetState
+from tests.integration.waiting import wait_for
 
 LIMIT_S = 30.0
 ADDRESSES = (1, 2, 3)
@@ -84,13 +85,6 @@ async def enc_line(
             plan, codec=codec_for(plan), transport=transport, clock=clock, observer=fleet
         ) as master:
             yield Line(server, master, fleet)
-
-
-async def wait_for(condition: Callable[[], object], timeout_s: float = 10.0) -> None:
-    """Poll ``condition`` (state of the master and the simulator, which signal nothing)."""
-    async with asyncio.timeout(timeout_s):
-        while not condition():  # noqa: ASYNC110 - nothing to wait on but the state itself
-            await asyncio.sleep(0.02)
 
 
 def state(line: Line, name: str) -> dict[str, Any]:
@@ -196,7 +190,8 @@ async def test_bad_checksums_and_timeouts_are_counted_and_recovered() -> None:
     faults = FaultPlan(drop=0.05, corrupt=0.05, noise=0.05, seed=3)
     async with enc_line(faults) as line:
         master = line.master
-        await wait_for(lambda: master.stats.replies >= 300, timeout_s=20.0)
+        # 19200 baud ASCII: ~40 replies/s, so 150 give ~15 injected faults to ride out.
+        await wait_for(lambda: master.stats.replies >= 150, timeout_s=30.0)
         results = await asyncio.gather(
             *(master.drive(f"d{a}").read("running_frequency") for a in ADDRESSES for _ in range(5))
         )

@@ -7,11 +7,10 @@ pseudo-terminal by the test's event loop, as a technician would run them on a re
 
 from __future__ import annotations
 
-import asyncio
 import json
-import sys
 import time
 from contextlib import AbstractAsyncContextManager
+from pathlib import Path
 
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer
 from fcmaster.sim.mitsubishi import MitsubishiSimDrive
@@ -117,29 +116,14 @@ async def test_control_starts_stops_and_resets_a_drive() -> None:
         assert "jog" in err
 
 
-async def test_fcmaster_sim_serves_mitsubishi_drives_that_scan_finds() -> None:
-    sim = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "fcmaster", "sim", "--protocol", "mitsubishi",
-        "--addresses", "0-1", "--stopbits", "2",
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
-    try:
-        assert sim.stdout is not None
-        async with asyncio.timeout(commissioning.LIMIT_S):
-            name, path = (await sim.stdout.readline()).decode().split()
-            assert name == "line1"
-            scan = await asyncio.create_subprocess_exec(
-                sys.executable, "-m", "fcmaster", "scan", "--port", path,
-                "--protocol", "mitsubishi", "--addresses", "0-3", "--json",
-                stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-            )  # fmt: skip
-            out, err = await scan.communicate()
-        assert scan.returncode == 0, err.decode()
-        assert [entry["address"] for entry in json.loads(out)] == [0, 1]
-    finally:
-        if sim.returncode is None:
-            sim.terminate()
-        await asyncio.wait_for(sim.wait(), 10)
+async def test_fcmaster_sim_serves_mitsubishi_drives_that_scan_finds(tmp_path: Path) -> None:
+    name, found = await commissioning.scan_a_served_sim(
+        tmp_path,
+        ("--protocol", "mitsubishi", "--addresses", "0-1", "--stopbits", "2"),
+        ("--protocol", "mitsubishi", "--addresses", "0-3"),
+    )
+    assert name == "line1"
+    assert found == [0, 1]
 
 
 async def test_line_options_follow_drives_set_to_cr_lf_and_their_own_waiting_time() -> None:

@@ -6,7 +6,7 @@ is set up the way the config does it: ``codec_for`` and the protocol's answer de
 """
 
 import asyncio
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
@@ -22,6 +22,7 @@ from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.mitsubishi import MitsubishiSimDrive
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
+from tests.integration.waiting import wait_for
 
 LIMIT_S = 40.0
 STATIONS = (0, 1, 10, 31)  # 10 is "0A" on the wire, 31 "1F"
@@ -60,13 +61,6 @@ def sim_drive(server: PtyServer, address: int) -> MitsubishiSimDrive:
     drive = next(d for d in server.line.drives if d.address == address)
     assert isinstance(drive, MitsubishiSimDrive)
     return drive
-
-
-async def wait_for(condition: Callable[[], object], timeout_s: float = 10.0) -> None:
-    """Poll ``condition`` (state of the master and the simulator, which signal nothing)."""
-    async with asyncio.timeout(timeout_s):
-        while not condition():  # noqa: ASYNC110 - nothing to wait on but the state itself
-            await asyncio.sleep(0.02)
 
 
 async def test_polls_commands_and_parameter_access_over_the_pty() -> None:
@@ -142,7 +136,7 @@ async def test_a_silent_drive_is_demoted_and_comes_back() -> None:
 
 
 async def test_reset_restarts_the_drive_and_the_master_waits_for_it() -> None:
-    async with line_with_master(FaultPlan(), parameters={"Pr.122": 0.3}) as (server, master):
+    async with line_with_master(FaultPlan(), parameters={"Pr.122": 1.0}) as (server, master):
         d1, drive = master.drive("d1"), sim_drive(server, 1)
         await wait_for(lambda: master.planner.slot("d1").online)
         assert (await d1.start(frequency_hz=15.0)).ok
@@ -160,6 +154,6 @@ async def test_reset_restarts_the_drive_and_the_master_waits_for_it() -> None:
         intent = master.planner.slot("d1").intent
         assert intent is not None
         assert intent.motion is Motion.STOP  # … and the master will not start it again
-        await asyncio.sleep(0.5)  # polls go on: Pr.122 = 0.3 s never runs out
+        await asyncio.sleep(2.0)  # polls go on: Pr.122 = 1 s never runs out
         assert drive.control.fault is None
         assert master.stats.timeouts == timeouts

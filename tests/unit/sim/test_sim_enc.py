@@ -176,6 +176,7 @@ def test_a_broadcast_is_obeyed_and_never_answered() -> None:
     for address in (1, 2):
         bench.send(request(address, 12, 0x05, data=2000))
     bench.wait(2.0)
+    assert bench.frequency_hz(1) == bench.frequency_hz(2) == 20.0  # both running first
     assert bench.send(request(127, 12, 0x07)) == b""
     bench.wait(2.0)
     assert bench.frequency_hz(1) == bench.frequency_hz(2) == 0.0

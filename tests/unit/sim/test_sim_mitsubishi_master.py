@@ -86,15 +86,14 @@ async def test_reset_is_sent_once_and_the_drive_is_left_alone_while_it_restarts(
         timeouts = master.stats.timeouts
         result = await clock.complete(d0.reset())
         assert result.outcome is Outcome.DONE
-        reset_at = clock.now()
         await clock.run_for(RESTART_S * 0.9)
         # Nothing went to d0 while it restarted; d5 was polled all the while.
         assert master.stats.drives["d0"].requests == before + 1
         assert master.stats.drives["d5"].replies > 10
-        await clock.run_for(2.0)
+        await clock.run_for(RESTART_S * 0.2)  # just past the restart: d0 is polled again
         assert master.stats.drives["d0"].requests > before + 1
+        await clock.run_for(2.0)
         assert master.stats.timeouts == timeouts  # it was never asked while deaf
-        assert clock.now() - reset_at >= RESTART_S
         intent = master.planner.slot("d0").intent
         assert intent is not None
         assert intent.motion is Motion.STOP  # a reset never restarts the motor
@@ -102,12 +101,14 @@ async def test_reset_is_sent_once_and_the_drive_is_left_alone_while_it_restarts(
         assert not drives[0].motor.output_on
 
 
-async def test_the_drives_watchdog_trips_it_once_the_master_is_gone_and_a_reset_clears_it() -> None:
+async def test_the_drives_watchdog_trips_it_once_the_master_is_gone() -> None:
     clock = VirtualClock()
     master, drives = master_on_sim(clock, Pr_122=1.0)
     async with master:
         assert (await clock.complete(master.drive("d0").start(frequency_hz=25.0))).ok
         await clock.run_for(3.0)
+        drives[0].advance(clock.now())
+        assert drives[0].control.fault is None  # fed by the polls while the master runs
     await clock.run_for(2.0)  # the master is gone
     drives[0].advance(clock.now())
     assert drives[0].control.fault == 0xB1  # E.PUE
