@@ -85,7 +85,7 @@ class MitsubishiControl:
     def advance(self, now: float) -> None:
         """Bring the motor and the communication check up to ``now``."""
         deadline = self._check_deadline()
-        if deadline is not None and deadline <= now and self.fault is None:
+        if deadline is not None and deadline <= now:
             self.trip(E_PUE, deadline)
         self.motor.advance(now)
 
@@ -107,7 +107,12 @@ class MitsubishiControl:
         self._apply(now)
 
     def trip(self, code: int, now: float) -> None:
-        """Trip with fault ``code``: output off, fault output on, the code in the history."""
+        """Trip with fault ``code``: output off, fault output on, the code in the history.
+
+        A tripped drive does not trip again (one entry in the history per trip).
+        """
+        if self.fault is not None:
+            return
         self.motor.set_command(MotorCommand(mode=Mode.OFF), now)
         self.fault = code
         self.history.insert(0, code)

@@ -37,6 +37,7 @@ from typing import Final
 from fcmaster.bus.plan import LinePlan
 from fcmaster.errors import UsageError
 from fcmaster.protocol.mitsubishi.error_codes import (
+    COUNTS_TOWARD_TRIP,
     DATA_RANGE_ERROR,
     INSTRUCTION_CODE_ERROR,
     MODE_ERROR,
@@ -202,12 +203,15 @@ class MitsubishiSimDrive:
         return code, data, wait_ms
 
     def _reception_error(self, code: int, now: float) -> bytes:
-        """NAK a broken request; too many in a row trip the drive (Pr.121)."""
-        self._errors += 1
+        """NAK a broken request; too many in a row trip the drive (Pr.121).
+
+        Only errors 0-5 count toward the trip (§5): a character error (7) does not.
+        """
+        if code in COUNTS_TOWARD_TRIP:
+            self._errors += 1
         allowed = self.parameters[121]
         if allowed != SETTING_9999 and self._errors > allowed:
-            if self.control.fault is None:
-                self.control.trip(E_PUE, now)
+            self.control.trip(E_PUE, now)
             return self._nak(COMPUTER_NAK)
         return self._nak(code)
 

@@ -190,6 +190,21 @@ def test_consecutive_reception_errors_beyond_pr121_trip_the_drive() -> None:
     assert bench.read(0x74) & 0xFF == 0xB1  # E.PUE
 
 
+def test_character_errors_do_not_count_toward_the_pr121_trip() -> None:
+    bench = Bench(1)  # Pr.121 = 1
+    for _ in range(3):  # lowercase "a": error 7, which §5 leaves out of the count
+        assert decode_frame(bench.raw(b"\x05017a029\r")) == nak(7)
+    assert bench.read(0x7A) & ST.ABC1 == 0  # not tripped
+
+
+def test_run_commands_to_a_tripped_drive_add_no_history() -> None:
+    bench = Bench(1, parameters={"Pr.122": 0.0})  # Pr.122 = 0: a link run command trips
+    assert bench.write(0xFA, 0x02, 2) == Ack(1)
+    assert bench.read(0x74) & 0xFF == 0xB1  # E.PUE, latest in the history
+    assert bench.write(0xFA, 0x02, 2) == Ack(1)
+    assert bench.read(0x74) >> 8 != 0xB1  # the same trip, not a second entry
+
+
 # -- running ------------------------------------------------------------------------------
 
 
