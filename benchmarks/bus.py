@@ -282,6 +282,10 @@ class TapTransport:
         self.reads.append(now())
         return data
 
+    @property
+    def received_at(self) -> float:
+        return self.inner.received_at
+
     def discard_input(self) -> bytes:
         return self.inner.discard_input()
 

@@ -76,6 +76,10 @@ class TapTransport:
     async def read(self, deadline: float) -> bytes:
         return await self.inner.read(deadline)
 
+    @property
+    def received_at(self) -> float:
+        return self.inner.received_at
+
     def discard_input(self) -> bytes:
         return self.inner.discard_input()
 

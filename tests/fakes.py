@@ -154,6 +154,7 @@ class ScriptedTransport:
     open_attempts: list[float] = field(default_factory=list)
     fail_open: bool = False
     lost: bool = False  # the port is gone: writes and reads raise PortError
+    received_at: float = 0.0  # when the last bytes read arrived
     _arrivals: list[tuple[float, bytes]] = field(default_factory=list)  # sorted by time
     _reply_until: float = float("-inf")
 
@@ -213,5 +214,7 @@ class ScriptedTransport:
         while count < len(self._arrivals) and self._arrivals[count][0] <= now:
             count += 1
         arrived = b"".join(chunk for _, chunk in self._arrivals[:count])
+        if count:
+            self.received_at = self._arrivals[count - 1][0]
         del self._arrivals[:count]
         return arrived

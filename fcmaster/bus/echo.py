@@ -60,6 +60,11 @@ class EchoCancellingTransport:
             if data:
                 return data
 
+    @property
+    def received_at(self) -> float:
+        """When the wrapped transport last delivered bytes."""
+        return self._inner.received_at
+
     def discard_input(self) -> bytes:
         """Drop unread input; an echo still expected is dropped with it."""
         held, self._held, self._expect = self._held, b"", b""

@@ -92,7 +92,7 @@ class Link:
         else:
             # The pause runs from the reply's arrival, so decoding it, the planner's update
             # and the next request's encoding all happen inside the pause.
-            arrived = self.replied_at = self._arrived
+            arrived = self.replied_at = max(self._arrived, written_at)
             stats.replies += 1
             stats.latency.observe(arrived - written_at)
             self._replied_at = arrived
@@ -122,7 +122,7 @@ class Link:
                 if reply is not None or read_deadline >= deadline:
                     return reply
                 continue
-            last_rx = self._arrived = clock.now()
+            last_rx = self._arrived = transport.received_at
             framer.feed(chunk)
             reply = self._drain(exchange)
             if reply is not None:

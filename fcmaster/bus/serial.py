@@ -22,6 +22,7 @@ from __future__ import annotations
 import asyncio
 import os
 import termios
+import time
 from typing import Any, Protocol
 
 import serial
@@ -52,8 +53,10 @@ class _Receiver(asyncio.Protocol):
         self.buffer = bytearray()
         self.waiter: asyncio.Future[None] | None = None
         self.lost: Exception | None = None
+        self.received_at = 0.0
 
     def data_received(self, data: bytes) -> None:
+        self.received_at = time.monotonic()  # the loop's and MonotonicClock's timebase
         self.buffer += data
         waiter = self.waiter
         if waiter is not None and not waiter.done():
@@ -260,6 +263,11 @@ class SerialTransport:
         data = bytes(receiver.buffer)
         receiver.buffer.clear()
         return data
+
+    @property
+    def received_at(self) -> float:
+        """When the port last delivered bytes (monotonic time)."""
+        return self._receiver.received_at
 
     def discard_input(self) -> bytes:
         """Drop and return the bytes received but not read."""

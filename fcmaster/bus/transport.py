@@ -29,5 +29,14 @@ class Transport(Protocol):
         arrived by then, PortError when the port is gone.
         """
 
+    @property
+    def received_at(self) -> float:
+        """When the bytes the last ``read`` returned arrived, on the injected clock's timebase.
+
+        Noted where the bytes are first seen (a serial port's reader callback), not when the
+        reader gets to them: the pause after a reply counts from its arrival, and the
+        event-loop pass in between is no part of it.
+        """
+
     def discard_input(self) -> bytes:
         """Drop and return whatever was received and not read yet (late replies, noise)."""

@@ -24,6 +24,7 @@ class SimTransport:
         self.line = line
         self._clock = clock
         self._open = False
+        self.received_at = 0.0  # the simulated line hands bytes over as they arrive
 
     async def open(self) -> None:
         """Connect; a simulated line is always there."""
@@ -45,6 +46,7 @@ class SimTransport:
         while True:
             data = line.receive()
             if data:
+                self.received_at = clock.now()
                 return data
             if clock.now() >= deadline:
                 raise ReplyTimeout(f"nothing from {self.port} before the deadline", bus=self.port)

@@ -47,6 +47,26 @@ async def test_bytes_go_out_in_one_write_and_replies_come_back(
         await transport.close()
 
 
+async def test_bytes_are_stamped_when_they_arrive_not_when_they_are_read(
+    pty_pair: tuple[int, str],
+) -> None:
+    # The pause after a reply counts from its arrival: a reader that gets to the bytes late
+    # (another callback ran first) must still learn when they came.
+    controller, path = pty_pair
+    transport = SerialTransport(path, baudrate=19200)
+    await transport.open()
+    clock = MonotonicClock()
+    try:
+        sent_at = clock.now()
+        os.write(controller, b"\x02\x06\x81")
+        await asyncio.sleep(0.1)  # the loop takes the bytes in; nobody reads them yet
+        read_at = clock.now()
+        assert await transport.read(read_at + 1.0) == b"\x02\x06\x81"
+        assert sent_at <= transport.received_at < sent_at + 0.05 < read_at
+    finally:
+        await transport.close()
+
+
 async def test_a_read_with_nothing_arriving_times_out_at_its_deadline(
     pty_pair: tuple[int, str],
 ) -> None:

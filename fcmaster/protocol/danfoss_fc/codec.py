@@ -60,7 +60,13 @@ from fcmaster.protocol.danfoss_fc.words import (
 )
 from fcmaster.protocol.drive import ControlIntent
 
-_FAULT_BITS: Final = StatusWord.TRIP | StatusWord.TRIP_LOCK | StatusWord.ERROR
+# Plain ints: a reply is decoded on every transaction, and masking an int with an IntFlag
+# member builds a new flag object each time.
+_RUNNING: Final = int(StatusWord.RUNNING)
+_FAULT_BITS: Final = int(StatusWord.TRIP | StatusWord.TRIP_LOCK | StatusWord.ERROR)
+_WARNING: Final = int(StatusWord.WARNING)
+_AT_REFERENCE: Final = int(StatusWord.AT_REFERENCE)
+_BUS_CONTROL: Final = int(StatusWord.BUS_CONTROL)
 _TEXT_REPLY_LENGTH: Final = LGE_TEXT_BASE + DEFAULT_MAX_TEXT_LENGTH + 2
 _INFINITY: Final = float("inf")
 
@@ -90,12 +96,12 @@ def decode_status(word: int, output_pct: float) -> DriveStatus:
     """
     return DriveStatus(
         word=word,
-        running=bool(word & StatusWord.RUNNING),
+        running=bool(word & _RUNNING),
         fault=bool(word & _FAULT_BITS),
-        warning=bool(word & StatusWord.WARNING),
-        at_reference=bool(word & StatusWord.AT_REFERENCE),
+        warning=bool(word & _WARNING),
+        at_reference=bool(word & _AT_REFERENCE),
         reverse=None if output_pct == 0 else output_pct < 0,
-        accepts_bus_control=bool(word & StatusWord.BUS_CONTROL),
+        accepts_bus_control=bool(word & _BUS_CONTROL),
     )
 
 

@@ -27,6 +27,7 @@ class Chunks:
     chunks: list[bytes]
     written: list[bytes] = field(default_factory=list)
     stale: bytes = b""
+    received_at: float = 0.0
 
     async def open(self) -> None:
         pass
