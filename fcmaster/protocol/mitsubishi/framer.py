@@ -8,9 +8,10 @@ or NAK. A candidate is judged field by field as its bytes arrive:
 * ACK st, NAK st e (a drive's NAK; the master's own has no e): fixed lengths, hex fields.
 * STX st data ETX sc: the data runs to the first ETX and must be 2, 4, 6 or 12 hex digits
   or 20 characters of text (the model name); then the sum check must match.
-* ENQ st ic [w] data sc: the instruction code fixes the data width (§9): none for a read
-  code, 2 for HFA/HF3/HFF/HEC, 10 for HF0, otherwise 4 or 6, settled by the sum check (and
-  the terminator); ``wait_digit`` says whether the line carries the waiting-time digit.
+* ENQ st ic [w] data sc: the instruction code fixes the data width (§9, ``request_widths``):
+  none for a read code, 2 for HFA/HF3/HFF/HEC, 10 for HF0, otherwise 4 or 6, settled by the
+  sum check (and the terminator); ``wait_digit`` says whether the line carries the
+  waiting-time digit.
 * Then the terminator the line is set to (Pr.124). With CR + LF a missing LF is tolerated
   (§12): the frame ends after CR when the next byte is not LF, or at a gap. A missing CR is
   not: ACK and NAK frames have no sum check, and the terminator is the only thing that
@@ -29,6 +30,7 @@ from __future__ import annotations
 from typing import Final
 
 from fcmaster.protocol.framing import Frame, FramerBuffer, Skipped, SkipReason
+from fcmaster.protocol.mitsubishi.instructions import request_widths
 from fcmaster.protocol.mitsubishi.message import (
     ACK,
     CR,
@@ -45,8 +47,6 @@ from fcmaster.protocol.mitsubishi.message import (
 
 MAX_FRAME_LENGTH: Final = 28  # E3 with CR LF (§6)
 _DATA_WIDTHS: Final = frozenset((2, 4, 6, 12))
-_TWO_DIGIT_WRITES: Final = frozenset((0xFA, 0xF3, 0xFF, 0xEC))  # §9: A1/A' writes
-_MULTI_COMMAND: Final = 0xF0
 
 # What a judge returns: a frame length, a reason to give up the start byte, or None (wait).
 _Verdict = int | SkipReason | None
@@ -137,17 +137,8 @@ class MitsubishiFramer(FramerBuffer):
             return SkipReason.BAD_LENGTH
         if end < first_data:
             return None
-        instruction = int(buf[3:5], 16)
-        if instruction < 0x80:
-            widths: tuple[int, ...] = (0,)
-        elif instruction == _MULTI_COMMAND:
-            widths = (10,)
-        elif instruction in _TWO_DIGIT_WRITES:
-            widths = (2,)
-        else:
-            widths = (4, 6)
         reason = SkipReason.BAD_LENGTH
-        for width in widths:
+        for width in request_widths(int(buf[3:5], 16)):
             sum_at = first_data + width
             if not self._hex_run(first_data, min(sum_at + 2, end)):
                 return reason

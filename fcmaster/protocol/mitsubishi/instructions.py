@@ -140,6 +140,22 @@ def is_paged(code: int) -> bool:
     return code <= LAST_PAGED_READ or FIRST_PAGED_WRITE <= code <= FIRST_PAGED_WRITE + 0x63
 
 
+def request_widths(code: int) -> tuple[int, ...]:
+    """Data widths a request with instruction ``code`` may carry (§6, §9).
+
+    The one rule the codec's framer, the simulator's receiver and the simulated drive all
+    cut requests by. A read code carries none. A write of two digits (A1: HEC, HF3, HFA,
+    HFF) or of ten (the multi command HF0) carries just that; any other write, known or
+    not, four or six (A or A2), which only the sum check tells apart.
+    """
+    if code < FIRST_PAGED_WRITE:  # read codes are 00-7F
+        return (0,)
+    item = BY_CODE.get(code)
+    if item is not None and item.digits in (2, 10):
+        return (item.digits,)
+    return (4, 6)
+
+
 def describe_code(code: int) -> str:
     """A short name for an instruction code, as in the manuals' tables."""
     item = BY_CODE.get(code)

@@ -32,6 +32,7 @@ for a reset after changing the communication parameters.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Final
 
 from fcmaster.bus.plan import LinePlan
@@ -42,7 +43,11 @@ from fcmaster.protocol.mitsubishi.error_codes import (
     INSTRUCTION_CODE_ERROR,
     MODE_ERROR,
 )
-from fcmaster.protocol.mitsubishi.instructions import RESET_AFTER_ACK, RESET_NO_REPLY
+from fcmaster.protocol.mitsubishi.instructions import (
+    RESET_AFTER_ACK,
+    RESET_NO_REPLY,
+    request_widths,
+)
 from fcmaster.protocol.mitsubishi.message import (
     ENQ,
     HEX_DIGITS,
@@ -75,7 +80,6 @@ PROTOCOL_ERROR: Final = 0x3
 SUM_ERROR: Final = 0x2
 CHARACTER_ERROR: Final = 0x7
 COMPUTER_NAK: Final = 0x0
-_TWO_DIGITS: Final = frozenset((0xFA, 0xF3, 0xFF, 0xEC))
 _TERMINATORS: Final = (Terminator.NONE, Terminator.CR, Terminator.CRLF)  # Pr.124 = 0, 1, 2
 _BAUD: Final = (4800, 9600, 19200, 38400)  # Pr.118 × 100
 _CLEARS: Final = {0x9696: False, 0x9966: False, 0x5A5A: True, 0x55AA: True}  # keep comm?
@@ -193,7 +197,7 @@ class MitsubishiSimDrive:
         if width < 0:
             raise _Refused(PROTOCOL_ERROR)
         code = int(chars[2:4], 16)
-        if width not in _widths(code):
+        if width not in request_widths(code):
             raise _Refused(PROTOCOL_ERROR)
         checked = chars[:-2]
         if int(chars[-2:], 16) != sum_check(checked):
@@ -223,35 +227,16 @@ class MitsubishiSimDrive:
         return self._write(code, data, now)
 
     def _read(self, code: int) -> bytes:
-        control, motor = self.control, self.motor
         if code <= 0x63:
             return self._data(self.parameters[self._parameter(code)], 4)
-        monitors: dict[int, tuple[int, int]] = {
-            0x6C: (self._second, 2),
-            0x6D: (_hz(control.set_hz), 4),
-            0x6E: (_hz(control.set_hz_eeprom), 4),
-            0x6F: (_hz(abs(motor.frequency_hz)), 4),
-            0x70: (_fit(motor.current_a * 100), 4),
-            0x71: (_fit(motor.voltage_v * 10), 4),
-            0x72: (self._special(), 4),
-            0x73: (self._monitor, 2),
-            0x74: (control.fault_word(0), 4),
-            0x75: (control.fault_word(2), 4),
-            0x76: (control.fault_word(4), 4),
-            0x77: (control.fault_word(6), 4),
-            0x79: (control.status(extended=True), 4),
-            0x7A: (control.status(extended=False), 2),
-            0x7B: (int(control.mode), 4),
-            0x7F: (self._page, 2),
-        }
         if code == 0x7C:
             text = MODEL_NAME.ljust(TEXT_WIDTH)[:TEXT_WIDTH]
             reply = DataReply(station=self._station, data=None, width=TEXT_WIDTH, text=text)
             return encode_frame(reply, self._terminator)
-        if code not in monitors:
+        if code not in _MONITORS:
             raise _Refused(INSTRUCTION_CODE_ERROR)
-        value, width = monitors[code]
-        return self._data(value, width)
+        value, width = _MONITORS[code]
+        return self._data(value(self), width)
 
     def _write(self, code: int, data: int, now: float) -> bytes | None:
         control = self.control
@@ -371,23 +356,34 @@ def _is_slow(code: int) -> bool:
     return code <= 0x63 or 0x80 <= code <= 0xE3 or code in (0xEE, 0xFC)
 
 
-def _widths(code: int) -> tuple[int, ...]:
-    """Data widths a request with instruction ``code`` may carry (§6, §9)."""
-    if code < 0x80:
-        return (0,)
-    if code == 0xF0:
-        return (10,)
-    if code in _TWO_DIGITS:
-        return (2,)
-    return (4, 6)
-
-
 def _hz(frequency: float) -> int:
     return _fit(frequency * 100)
 
 
 def _fit(value: float) -> int:
     return min(max(round(value), 0), 0xFFFF)
+
+
+# Page-independent reads (H6C-H7F but H7C, the model name): the value, read only for the
+# code asked, and its width in digits. Built once; the getters see the drive's state now.
+_MONITORS: Final[dict[int, tuple[Callable[[MitsubishiSimDrive], int], int]]] = {
+    0x6C: (lambda d: d._second, 2),
+    0x6D: (lambda d: _hz(d.control.set_hz), 4),
+    0x6E: (lambda d: _hz(d.control.set_hz_eeprom), 4),
+    0x6F: (lambda d: _hz(abs(d.motor.frequency_hz)), 4),
+    0x70: (lambda d: _fit(d.motor.current_a * 100), 4),
+    0x71: (lambda d: _fit(d.motor.voltage_v * 10), 4),
+    0x72: (MitsubishiSimDrive._special, 4),
+    0x73: (lambda d: d._monitor, 2),
+    0x74: (lambda d: d.control.fault_word(0), 4),
+    0x75: (lambda d: d.control.fault_word(2), 4),
+    0x76: (lambda d: d.control.fault_word(4), 4),
+    0x77: (lambda d: d.control.fault_word(6), 4),
+    0x79: (lambda d: d.control.status(extended=True), 4),
+    0x7A: (lambda d: d.control.status(extended=False), 2),
+    0x7B: (lambda d: int(d.control.mode), 4),
+    0x7F: (lambda d: d._page, 2),
+}
 
 
 def line_receiver(drives: list[DriveSettings]) -> RequestReceiver:

@@ -10,9 +10,10 @@ drive:
 * ENQ … up to the terminator the line is set to (Pr.124: CR, or CR LF), at most
   :data:`MAX_REQUEST` bytes; a candidate that never ends is dropped at the next start
   character.
-* With no terminator (Pr.124 = 0) the length follows from the instruction code and whether
-  the waiting-time digit travels (Pr.123 = 9999): read codes carry no data; HFA, HF3, HFF
-  and HEC two digits; HF0 ten; the others four or six, told apart by the sum check.
+* With no terminator (Pr.124 = 0) the length follows from the instruction code
+  (``request_widths``: the same rule the codec's framer and the drive use) and whether the
+  waiting-time digit travels (Pr.123 = 9999); four or six digits are told apart by the sum
+  check.
 * ACK st / NAK st [t]: the master's optional answer to a data reply (§2 step 5), handed on
   as a frame so the drives can ignore it.
 
@@ -25,12 +26,11 @@ from __future__ import annotations
 from typing import Final
 
 from fcmaster.protocol.framing import Frame, FramerBuffer, Skipped, SkipReason
+from fcmaster.protocol.mitsubishi.instructions import request_widths
 from fcmaster.protocol.mitsubishi.message import ACK, CR, ENQ, LF, NAK, Terminator, sum_check
 
 MAX_REQUEST: Final = 20  # HF0 with the waiting time and CR LF (§6)
 _STARTS: Final = (ENQ, ACK, NAK)
-_TWO_DIGITS: Final = frozenset((0xFA, 0xF3, 0xFF, 0xEC))
-_MULTI: Final = 0xF0
 _HEX: Final = frozenset(b"0123456789ABCDEF")
 
 
@@ -94,21 +94,15 @@ class RequestReceiver(FramerBuffer):
             return None
         if not _HEX.issuperset(buf[3:5]):
             return SkipReason.BAD_LENGTH  # no way to tell how long it is
-        code = int(buf[3:5], 16)
-        if code < 0x80:
-            return first_data + 2
-        if code == _MULTI:
-            return first_data + 12
-        if code in _TWO_DIGITS:
-            return first_data + 4
-        # Four or six digits: the one whose sum is right; four when neither is (yet).
-        for width in (4, 6):
+        widths = request_widths(int(buf[3:5], 16))
+        # The width whose sum is right; the first when none is, and the drive NAKs the sum.
+        for width in widths:
             end = first_data + width + 2
             if len(buf) < end:
                 return None
-            if buf[end - 2 : end].isascii() and _sum_ok(buf[1 : end - 2], buf[end - 2 : end]):
+            if _sum_ok(buf[1 : end - 2], buf[end - 2 : end]):
                 return end
-        return first_data + 6
+        return first_data + widths[0] + 2
 
 
 def _sum_ok(checked: bytes | bytearray, digits: bytes | bytearray) -> bool:
