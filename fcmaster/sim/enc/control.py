@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from typing import Final
 
+from fcmaster.errors import UsageError
 from fcmaster.protocol.enc.codes import FAULT_TEXTS, NO_FAULT
 from fcmaster.protocol.enc.frame import RunControl
 from fcmaster.sim.enc.parameters import (
@@ -122,8 +123,10 @@ class EncControl:
         self._causes.discard(COMMUNICATION_FAULT)
 
     def run_control(self, index: int, data: int | None, now: float) -> None:
-        """Obey command 12 with ``index`` (§4.2); raise Refused as the drive answers it."""
-        self.advance(now)
+        """Obey command 12 with ``index`` (§4.2); raise Refused as the drive answers it.
+
+        The frame was accepted first, so :meth:`heard` has already brought the drive to ``now``.
+        """
         action = RunControl(index)  # the drive checked the index with the frame
         if not self.accepts_control:
             raise refused("the run command channel (F0.02) is not the serial port")
@@ -150,21 +153,15 @@ class EncControl:
             self.running = self.jogging = False
             self.emergency = True
         elif action is RunControl.FAULT_RESET:
-            self.reset(now)
-        self.refresh(now)
-
-    def reset(self, now: float) -> None:
-        """Clear the latched fault; Refused (30) while its cause is still present."""
-        self.advance(now)
-        if self.fault in self._causes:
-            raise refused(f"fault {self.fault} is still present")
-        self.fault = NO_FAULT
+            if self.fault in self._causes:
+                raise refused(f"fault {self.fault} is still present")
+            self.fault = NO_FAULT
         self.refresh(now)
 
     def raise_fault(self, code: int, now: float) -> None:
         """Trip with fault ``code`` (§7); its cause stays until :meth:`clear_fault`."""
         if code not in FAULT_TEXTS:
-            raise ValueError(f"no ENC fault {code} (§7 lists {sorted(FAULT_TEXTS)})")
+            raise UsageError(f"no ENC fault {code} (§7 lists {sorted(FAULT_TEXTS)})")
         self.advance(now)
         self._trip(code, now)
         self._causes.add(code)

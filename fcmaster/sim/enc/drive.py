@@ -138,8 +138,6 @@ class EncSimDrive:
             self.control.advance(now)
         self._settings = settings
         self._born = now
-        self._field_for = -1  # the address self._field was worked out for
-        self._field: int | None = None
         if self._address_field() is None:
             raise UsageError(f"address {address} cannot be written in decimal (1-99)")
 
@@ -170,7 +168,7 @@ class EncSimDrive:
             self._cycle_warning(now)
         try:
             request = self._checked(frame)
-            self.control.heard(now)
+            self.control.heard(now)  # brings the drive to now, once for the whole request
             code, data = self._serve(request, now)
         except Refused as refusal:
             if refusal.code == ResponseCode.FRAME_ERROR:
@@ -178,7 +176,6 @@ class EncSimDrive:
             code, data = refusal.code, 0
         if broadcast:
             return None
-        self.advance(now)
         return encode_response(
             Response(
                 address=field,
@@ -190,16 +187,14 @@ class EncSimDrive:
         )
 
     def _address_field(self) -> int | None:
-        """How this drive writes its own address (None: it cannot, in this encoding)."""
-        address = self.address
-        if address == self._field_for:
-            return self._field
-        self._field_for = address
+        """How this drive writes its own address (None: it cannot, in this encoding).
+
+        Worked out from F2.15 each time rather than kept, since the bus may rewrite F2.15.
+        """
         try:
-            self._field = encode_number(address, self._address_encoding)
+            return encode_number(self.address, self._address_encoding)
         except UsageError:  # an address of 100 or more cannot be written in decimal
-            self._field = None
-        return self._field
+            return None
 
     # -- requests -------------------------------------------------------------------------
 
@@ -234,17 +229,18 @@ class EncSimDrive:
         return request
 
     def _serve(self, request: Request, now: float) -> tuple[int, int]:
-        """The response code and data for a well-formed ``request``; Refused for 30."""
+        """The response code and data for a well-formed ``request``; Refused for 30.
+
+        The drive has already been brought to ``now`` (:meth:`EncControl.heard`).
+        """
         command, index = request.command, request.index
         if command == Command.LOOK_UP_STATE:
-            self.advance(now)
             if not self.control.ready:
                 return ResponseCode.NOT_READY, 0
             if not self.control.accepts_control:
                 return ResponseCode.READY_NO_CONTROL_13, 0
             return ResponseCode.READY_11, 0
         if command == Command.READ_VALUE:
-            self.advance(now)
             return ResponseCode.NORMAL, raw_reading(self, index)
         if command == Command.RUN_CONTROL:
             self.control.run_control(index, request.data, now)
@@ -253,7 +249,6 @@ class EncSimDrive:
             return ResponseCode.NORMAL, self.parameters[index]
         if command == Command.WRITE_PARAMETER:
             assert request.data is not None  # checked with the frame
-            self.advance(now)
             self.parameters.set(index, request.data, running=self.motor.output_on)
             self.control.refresh(now)
             return ResponseCode.NORMAL, request.data
