@@ -27,8 +27,9 @@ and under asyncio's default loop (epoll) for comparison.
   monitor-only with the default monitor list, so every poll is a 16-byte parameter
   telegram answered by 16 bytes. Logging is at ``warning`` (the daemon's ``info`` would
   add a line per command completed). The transport is wrapped by :class:`TapTransport`,
-  which only notes the time of each write and of each read that returned bytes; nothing
-  in ``fcmaster/`` is changed. The master's clock is a :class:`RecordingClock`.
+  which only notes the time of each write and, for each read that returned bytes, when
+  they reached the port (the transport's ``received_at``, stamped by its reader callback);
+  nothing in ``fcmaster/`` is changed. The master's clock is a :class:`RecordingClock`.
 * Commands: ``read 3-41`` (not in the monitor list, so its telegram is unmistakable) on a
   random drive, one at a time, each submitted a random 0…4 transaction times after the
   previous one ended, i.e. at a random phase of the transaction in flight.
@@ -38,8 +39,9 @@ one clock for both processes):
 
 * **line efficiency** = replies per second (the master's LineStats) ÷ the limit 1 / T, with
   T = (16 + 16) × 11 / baud + response delay + the master's pause (2 characters for FC);
-* **master overhead** = from the read that completed a reply to the next request's write,
-  minus the pause (median, p99), as the master sees it;
+* **master overhead** = from the moment the bytes that completed a reply reached the
+  master's port to the next request's write, minus the pause (median, p99), as the master
+  sees it;
 * **line gap** = the same gap as the simulator sees the wire: from the reply's last byte
   (its scheduled end) to the next request's first byte heard, minus the pause. It adds
   the pty both ways and the simulator's own lateness to the master's overhead;
@@ -49,12 +51,13 @@ one clock for both processes):
   not the simulator, which is another process.
 * **where the time goes**: the loss per transaction (mean write-to-write cycle − T) is
   split into request written → heard by the simulator (pty, its wake-up), the simulator's
-  timer lateness (reply due → sent), reply sent → the master's read returned (pty, the
-  master's wake-up) and the master's overhead; the four add up to the loss. The overhead is
+  timer lateness (reply due → sent), reply sent → its bytes reached the master's port (pty,
+  the master's wake-up) and the master's overhead; the four add up to the loss. The overhead is
   split in turn at the master's pause, whose ``sleep_until`` calls a recording clock notes
-  (the injected Clock seam; the master's code is unchanged): read returned → the start the
-  master counts its pause from ("decode": above zero when it decodes before it starts
-  counting), the pause's wake-up lateness, and wake-up → write.
+  (the injected Clock seam; the master's code is unchanged): reply reached the port → the
+  start the master counts its pause from ("decode": zero when the pause counts from the
+  arrival, as it does; above zero if the master started counting only after decoding),
+  the pause's wake-up lateness, and wake-up → write.
 * **harness ceiling** = T ÷ (T + the pty both ways + the simulator's lateness + the master's
   wake-up for the reply): the efficiency a master with no overhead at all could reach on
   this harness and machine.
@@ -253,7 +256,7 @@ def simulator(baudrate: int, delay_s: float, drives: int) -> Iterator[SimProcess
 
 
 class TapTransport:
-    """SerialTransport, noting when each write starts and each read returns bytes."""
+    """SerialTransport, noting when each write starts and when the bytes of each read came."""
 
     def __init__(self, inner: SerialTransport) -> None:
         self.inner = inner
@@ -279,7 +282,7 @@ class TapTransport:
 
     async def read(self, deadline: float) -> bytes:
         data = await self.inner.read(deadline)
-        self.reads.append(now())
+        self.reads.append(self.inner.received_at)  # when the bytes reached the port
         return data
 
     @property
@@ -601,7 +604,7 @@ def analyse(case: Case, loop: str, master: MasterRecord, sim: SimRecord) -> dict
         j = bisect.bisect_right(called_at, read_at)
         if j < len(pauses) and pauses[j][0] < writes[i + 1]:
             _, deadline, returned = pauses[j]
-            decode.append(deadline - pause - read_at)  # read returned → the pause began
+            decode.append(deadline - pause - read_at)  # reply reached the port → the pause began
             wake_late.append(returned - deadline)
             send.append(writes[i + 1] - returned)
         else:
@@ -623,7 +626,7 @@ def analyse(case: Case, loop: str, master: MasterRecord, sim: SimRecord) -> dict
         if reply_end is None or woke is None or read_at is None:
             continue
         sim_late.append(woke - reply_end)  # the reply's last byte due → the simulator sent it
-        back.append(read_at - woke)  # sent → the master's read returned it
+        back.append(read_at - woke)  # sent → its bytes reached the master's port
 
     elapsed = end - start
     replies = master.replies or 1
@@ -906,8 +909,8 @@ def main(argv: list[str] | None = None) -> int:
             floors += run_floors(case, duration_s)
     print()
     print("Where the time goes, mean µs per transaction: cycle - T = request written → heard by")
-    print("the simulator + its timer's lateness + reply sent → master's read returned + the")
-    print("master's overhead; which = read → pause counted from (decode) + the pause's wake-up")
+    print("the simulator + its timer's lateness + reply sent → reached the master's port + the")
+    print("master's overhead; which = arrival → pause counted from (decode) + the pause's wake-up")
     print("lateness + wake → next write; 'over': turnarounds that outlasted the pause. CPU µs")
     print("per transaction (user, system), voluntary sleeps and preemptions per transaction,")
     print("the simulator process's CPU share; the efficiency this harness allows a master with no")
