@@ -80,6 +80,6 @@ CHECKS = [
 
 
 @schema.parametrize()
-@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
+@settings(max_examples=60, suppress_health_check=list(HealthCheck))
 def test_the_api_never_answers_with_a_server_error(case: schemathesis.Case[Any]) -> None:
     case.call_and_validate(headers=OPERATOR, checks=CHECKS)

@@ -792,7 +792,7 @@ class PlannerMachine(RuleBasedStateMachine):
         st.tuples(st.floats(0.0, 0.6), st.sampled_from([True, True, False])), max_size=300
     )
 )
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=150)
 def test_polls_reach_every_drive_and_probes_keep_their_interval(
     events: list[tuple[float, bool]],
 ) -> None:
@@ -838,7 +838,6 @@ def test_polls_reach_every_drive_and_probes_keep_their_interval(
 PlannerMachine.TestCase.settings = settings(
     max_examples=150,
     stateful_step_count=40,
-    deadline=None,
     suppress_health_check=[HealthCheck.too_slow],
 )
 test_planner_invariants_hold_under_random_sequences = PlannerMachine.TestCase

@@ -192,7 +192,7 @@ def check_telegram(data: bytes) -> None:
 
 
 @given(st.data(), streams)
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300)
 def test_any_chunking_covers_every_byte_once(data: st.DataObject, stream: bytes) -> None:
     laws.any_chunking_covers_every_byte_once(
         FcFramer,
@@ -240,7 +240,7 @@ def test_every_telegram_comes_out_between_noise_without_stx(
         max_size=5,
     ),
 )
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300)
 def test_after_a_gap_every_telegram_comes_out_whatever_the_noise_before_it(
     data: st.DataObject, rounds: list[tuple[bytes, list[bytes]]]
 ) -> None:

@@ -175,7 +175,7 @@ def check_frame(data: bytes) -> None:
 
 
 @given(st.data(), streams)
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300)
 def test_any_chunking_covers_every_byte_once(data: st.DataObject, stream: bytes) -> None:
     cuts = laws.some_cuts(data, stream)
     laws.any_chunking_covers_every_byte_once(
@@ -210,7 +210,7 @@ def test_every_frame_comes_out_between_noise_without_a_head(
         max_size=5,
     ),
 )
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300)
 def test_after_a_gap_every_frame_comes_out_whatever_the_noise_before_it(
     data: st.DataObject, rounds: list[tuple[bytes, list[bytes]]]
 ) -> None:

@@ -207,7 +207,7 @@ def framer_for(config: tuple[Terminator, bool, bool]) -> Callable[[], Mitsubishi
 
 
 @given(st.data(), configs)
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300)
 def test_any_chunking_covers_every_byte_once(
     data: st.DataObject, config: tuple[Terminator, bool, bool]
 ) -> None:
