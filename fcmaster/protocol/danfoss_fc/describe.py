@@ -98,8 +98,13 @@ def describe_telegram(frame: bytes, *, from_drive: bool) -> dict[str, Any]:
                 if from_drive
                 else (RequestAk.WRITE_DWORD, RequestAk.WRITE_DWORD_EEPROM)
             )
-            raw = spec.raw_from_pwe(telegram.pwe, double_word=double_word)
-            out["value"] = {"raw": raw, "value": spec.to_value(raw), "unit": spec.unit}
+            try:
+                raw = spec.raw_from_pwe(telegram.pwe, double_word=double_word)
+            except ProtocolError as exc:
+                # A capture may hold a PWE its data type cannot carry: show why, not a value.
+                out["value_error"] = str(exc)
+            else:
+                out["value"] = {"raw": raw, "value": spec.to_value(raw), "unit": spec.unit}
     if from_drive:
         out["status"] = flag_names(telegram.pcd1, StatusWord)
         out["output_pct"] = decode_reference(telegram.pcd2)

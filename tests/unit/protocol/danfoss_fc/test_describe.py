@@ -113,3 +113,20 @@ def test_describe_raises_nothing_but_usage_error(frame: bytes, from_drive: bool)
     except UsageError:
         return
     assert set(out) >= COMMON
+
+
+def test_a_pwe_its_data_type_cannot_carry_is_shown_as_an_error_not_raised() -> None:
+    # 16-34 is Uint8; a reply whose PWElow has bits above 8 set carries no valid value.
+    body = bytes.fromhex("02 0E 81 16 62 00 00 00 00 01 00 06 03 00 00")
+    frame = body + bytes((_xor(body),))
+    out = describe_telegram(frame, from_drive=True)
+    assert (out["parameter"], out["pwe"], out["bcc_ok"]) == ("16-34", 0x0100, True)
+    assert "value" not in out
+    assert "8 bits" in out["value_error"]
+
+
+def _xor(data: bytes) -> int:
+    result = 0
+    for byte in data:
+        result ^= byte
+    return result
