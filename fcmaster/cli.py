@@ -104,6 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
     check = commands.add_parser("check", help="validate a config file")
     check.add_argument("--config", type=Path, required=True)
 
+    modbus_map = commands.add_parser(
+        "modbus-map", help="the Modbus TCP register map of a config, for PLC programmers"
+    )
+    modbus_map.add_argument("--config", type=Path, required=True)
+    modbus_map.add_argument("--json", action="store_true", help="print JSON")
+
     scan = commands.add_parser("scan", help="find which addresses answer")
     _line_options(scan)
     scan.add_argument("--addresses", type=_addresses, help="default: every address")
@@ -234,6 +240,12 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return daemon.check(args.config)
 
 
+def _cmd_modbus_map(args: argparse.Namespace) -> int:
+    from fcmaster.commands import modbus_map
+
+    return modbus_map.run(args.config, as_json=args.json)
+
+
 def _cmd_scan(args: argparse.Namespace) -> int:
     from fcmaster.commands import commission
 
@@ -312,6 +324,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "run": _cmd_run,
     "check": _cmd_check,
+    "modbus-map": _cmd_modbus_map,
     "scan": _cmd_scan,
     "status": _cmd_status,
     "read": _cmd_read,
@@ -326,7 +339,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     args = build_parser().parse_args(argv)
-    if args.command not in ("run", "decode", "check"):
+    if args.command not in ("run", "decode", "check", "modbus-map"):
         from fcmaster import logsetup
 
         logsetup.configure("warning")  # commissioning tools: only what needs attention

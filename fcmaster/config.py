@@ -15,15 +15,24 @@ dataclasses; nothing below ``service`` ever sees pydantic.
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 from urllib.parse import urlsplit
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
@@ -49,6 +58,7 @@ class DriveModel(_Model):
     min_frequency_hz: float = Field(default=0.0, ge=0)
     max_frequency_hz: float | None = Field(default=None, gt=0)
     monitor: list[str] | None = None
+    modbus_unit: int | None = Field(default=None, ge=1, le=247)  # None: the bus address
 
 
 class BusModel(_Model):
@@ -160,6 +170,52 @@ class MqttModel(_Model):
         return topic
 
 
+def _cidr(text: str) -> str:
+    try:
+        ipaddress.ip_network(text, strict=False)
+    except ValueError:
+        raise ValueError(f"{text!r} is not an address or network like 10.0.0.0/8") from None
+    return text
+
+
+class ModbusModel(_Model):
+    """The Modbus TCP server for PLCs and SCADA (read-only unless ``commands: true``)."""
+
+    listen: str = "127.0.0.1:5020"
+    # Who may connect (addresses or CIDR networks); None: this machine only. Modbus has no
+    # authentication, so listening beyond loopback needs this list.
+    allow: list[Annotated[str, AfterValidator(_cidr)]] | None = None
+    commands: bool = False
+
+    @field_validator("listen")
+    @classmethod
+    def _check_listen(cls, listen: str) -> str:
+        host, port = modbus_listen(listen)
+        if not host or port is None or not 0 <= port <= 65535:
+            raise ValueError("write it like 127.0.0.1:5020 or [::1]:5020")
+        return listen
+
+
+def modbus_listen(text: str) -> tuple[str, int | None]:
+    """``"127.0.0.1:5020"`` or ``"[::1]:5020"`` → host and port (None if not a number)."""
+    text = text.strip()
+    if text.startswith("["):
+        host, _, rest = text[1:].partition("]")
+        port = rest[1:] if rest.startswith(":") else ""
+    else:
+        host, _, port = text.rpartition(":") if text.count(":") == 1 else (text, "", "")
+    return host, int(port) if port.isdigit() else None
+
+
+def _is_loopback(host: str) -> bool:
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 class MetricsModel(_Model):
     """Prometheus metrics at /metrics on the HTTP listener."""
 
@@ -179,6 +235,7 @@ class ConfigModel(_Model):
     buses: list[BusModel] = Field(min_length=1)
     http: HttpModel | None = None
     mqtt: MqttModel | None = None
+    modbus: ModbusModel | None = None
     metrics: MetricsModel | None = None
     logging: LoggingModel = LoggingModel()
     on_shutdown: Literal["hold", "stop"] = "hold"
@@ -330,6 +387,18 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
             _topic_level(bus.name, f"buses[{b}].name", problems)
             for d, drive in enumerate(bus.drives):
                 _topic_level(drive.name, f"buses[{b}].drives[{d}].name", problems)
+    if model.modbus is not None:
+        modbus_units(model, problems)
+        host, _ = modbus_listen(model.modbus.listen)
+        if model.modbus.allow is None and not _is_loopback(host):
+            problems.append(
+                (
+                    "modbus.listen",
+                    f"{model.modbus.listen} reaches beyond this machine and Modbus has no "
+                    "authentication: list the PLCs' addresses in modbus.allow "
+                    "(e.g. [10.0.5.0/24]) or listen on 127.0.0.1",
+                )
+            )
     if model.http is not None:
         secrets: dict[str, str] = {}
         for t, token in enumerate(model.http.tokens):
@@ -338,6 +407,41 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                 problems.append((path, f"the same token is already used at {secrets[token.token]}"))
             secrets.setdefault(token.token, path)
     return tuple(lines)
+
+
+def modbus_units(model: ConfigModel, problems: list[tuple[str, str]]) -> dict[str, int]:
+    """Each drive's Modbus unit id (``modbus_unit``, else its bus address), by drive name.
+
+    A unit id names one drive across every bus, so a clash (two lines that both have an
+    address 1) is a problem for ``problems``, with the fix.
+    """
+    units: dict[str, int] = {}
+    seen: dict[int, str] = {}
+    for b, bus in enumerate(model.buses):
+        for d, drive in enumerate(bus.drives):
+            where = f"buses[{b}].drives[{d}]"
+            unit = drive.address if drive.modbus_unit is None else drive.modbus_unit
+            if not 1 <= unit <= 247:
+                problems.append(
+                    (
+                        f"{where}.modbus_unit",
+                        f"address {unit} is no Modbus unit id (1-247): set modbus_unit",
+                    )
+                )
+                continue
+            key = f"{where}.modbus_unit" if drive.modbus_unit is not None else f"{where}.address"
+            if unit in seen:
+                problems.append(
+                    (
+                        f"{where}.modbus_unit",
+                        f"Modbus unit {unit} is already taken by {seen[unit]}: set a "
+                        "modbus_unit of its own on one of them",
+                    )
+                )
+                continue
+            seen[unit] = f"{drive.name} ({key})"
+            units[drive.name] = unit
+    return units
 
 
 def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:

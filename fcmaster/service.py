@@ -56,6 +56,7 @@ TransportFactory = Callable[[LinePlan], Transport]
 ADAPTERS = {
     "http": "fcmaster.adapters.http:HttpAdapter",
     "mqtt": "fcmaster.adapters.mqtt:MqttAdapter",
+    "modbus": "fcmaster.adapters.modbus:ModbusAdapter",
 }
 
 
@@ -209,6 +210,8 @@ class Service:
         if target == ADAPTERS["http"]:  # /metrics is served on the HTTP listener
             metrics = self.config.model.metrics
             options["metrics_enabled"] = metrics is not None and metrics.enabled
+        if target == ADAPTERS["modbus"]:  # unit ids and monitored values come from the lines
+            options["config"] = self.config
         factory = getattr(importlib.import_module(module), name)
         adapter: AbstractAsyncContextManager[Any] = factory(model, self, **options)
         return adapter

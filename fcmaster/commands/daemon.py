@@ -57,7 +57,9 @@ def check(path: Path) -> int:
             f"every monitored value refreshed within {refresh:.2f} s"
         )
     model = config.model
-    adapters = [name for name in ("http", "mqtt", "metrics") if getattr(model, name) is not None]
+    adapters = [
+        name for name in ("http", "mqtt", "modbus", "metrics") if getattr(model, name) is not None
+    ]
     print(f"  adapters: {', '.join(adapters) or 'none'}; on_shutdown: {model.on_shutdown}")
     return 0
 

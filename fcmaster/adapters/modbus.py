@@ -1,0 +1,314 @@
+"""The Modbus TCP adapter: every drive as a unit of registers, for PLCs and SCADA.
+
+Theory of operation
+-------------------
+:class:`ModbusAdapter` is an async context manager the service enters once the lines are
+up. Entering binds the listening socket (a taken port is a clear error naming
+``modbus.listen``) and serves connections in the daemon's own event loop. Each connection
+is one task that reads bytes, cuts them into requests (:mod:`.modbus_frames`) and answers
+them one after the other, in the order they came: a PLC that pipelines a reference and a
+start gets them carried out in that order. Connections never wait on each other.
+
+Reads are answered from the fleet state in memory (:mod:`.modbus_map`), never with a bus
+request. A write becomes a command for the shared command path — the same parser as HTTP
+and MQTT, then ``gateway.execute`` with ``modbus:HOST:PORT`` as the actor — and is answered
+only once that command has its one result: the normal answer when it is ``done``, else
+the exception :data:`EXCEPTION_OF` maps its outcome to. Which command a write makes:
+
+- ``command`` alone: that action; 0 does nothing;
+- ``reference_hz`` alone: ``set_reference`` at that frequency;
+- both in one write (FC 16 over registers 0-1): ``start`` carries the reference (one
+  command, refused as a whole when the reference is beyond the drive's limits); with 0 only
+  the reference is set; with any other action the action goes first and the reference
+  follows once the action is done.
+
+Safety rules (DESIGN.md "Safety and trust"): the listener is 127.0.0.1:5020 unless
+``modbus.listen`` says otherwise, and listening beyond loopback needs ``modbus.allow``
+(config validation refuses it otherwise); a connection from an address outside the allow
+list (loopback only when there is none) is closed before a byte is read. Writes are
+refused with ILLEGAL_FUNCTION unless ``modbus.commands: true``, and a refused write never
+reaches a line. A header that is not Modbus TCP closes its connection; a half frame is
+given :data:`PARTIAL_FRAME_S` to be completed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import socket
+import time
+from collections.abc import Callable
+from types import TracebackType
+from typing import Any, Final
+
+import structlog
+
+from fcmaster.adapters.commands import parse_command
+from fcmaster.adapters.gateway import Gateway
+from fcmaster.adapters.modbus_frames import (
+    Broken,
+    ExceptionCode,
+    Function,
+    MbapFramer,
+    Refusal,
+    Request,
+    encode_exception,
+    encode_registers,
+    encode_written,
+)
+from fcmaster.adapters.modbus_map import (
+    ACTIONS,
+    COMMAND_ADDRESS,
+    REFERENCE_ADDRESS,
+    REFERENCE_DECIMALS,
+    UnitMap,
+    register_map,
+)
+from fcmaster.bus.commands import CommandResult
+from fcmaster.config import Config, ModbusModel, modbus_listen
+from fcmaster.errors import ConfigError, UsageError
+
+log = structlog.get_logger("fcmaster.adapters.modbus")
+
+MAX_CONNECTIONS: Final = 64  # beyond this a new connection is closed: bounded memory
+PARTIAL_FRAME_S: Final = 5.0  # a frame begun must be whole by then (a stalled client)
+SEND_TIMEOUT_S: Final = 10.0  # a client that stops reading its answers is dropped
+READ_CHUNK: Final = 4096
+SHUTDOWN_GRACE_S: Final = 2.0  # writes in progress may get their answer
+
+# A command's outcome → the exception that answers its write (DESIGN.md "Modbus TCP").
+# Keyed by the outcome's public name, so outcomes still to come are mapped already.
+EXCEPTION_OF: Final = {
+    "not_allowed": ExceptionCode.ILLEGAL_DATA_VALUE,
+    "invalid": ExceptionCode.ILLEGAL_DATA_VALUE,
+    "refused": ExceptionCode.SERVER_DEVICE_FAILURE,
+    "unconfirmed": ExceptionCode.SERVER_DEVICE_FAILURE,
+    "superseded": ExceptionCode.SERVER_DEVICE_FAILURE,
+    "timeout": ExceptionCode.GATEWAY_TARGET_FAILED,
+    "cancelled": ExceptionCode.GATEWAY_PATH_UNAVAILABLE,
+}
+
+
+class _Refused(Exception):
+    """A write answered with an exception before or instead of its command."""
+
+    def __init__(self, code: ExceptionCode) -> None:
+        self.code = code
+
+
+class ModbusAdapter:
+    """Serves the register map while the context is entered.
+
+    Built by the service as ``ModbusAdapter(model, gateway, config=…)``; ``config`` gives
+    the drives' unit ids and monitored values.
+    """
+
+    def __init__(
+        self,
+        model: ModbusModel,
+        gateway: Gateway,
+        *,
+        config: Config,
+        demo: bool = False,
+        wall: Callable[[], float] = time.time,
+        partial_frame_s: float = PARTIAL_FRAME_S,
+    ) -> None:
+        self.model = model
+        self.partial_frame_s = partial_frame_s
+        self.gateway = gateway
+        self.map = register_map(config)
+        self._wall = wall
+        self._allow = tuple(ipaddress.ip_network(n, strict=False) for n in model.allow or ())
+        self._server: asyncio.Server | None = None
+        self._connections: set[asyncio.Task[None]] = set()
+        self._address: tuple[str, int] | None = None
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """The host and port it listens on (once entered)."""
+        if self._address is None:
+            raise RuntimeError("the Modbus adapter is not running")
+        return self._address
+
+    async def __aenter__(self) -> ModbusAdapter:
+        if self._server is not None:
+            raise RuntimeError("the Modbus adapter is already running")
+        host, port = modbus_listen(self.model.listen)
+        assert port is not None  # the config checked it
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        try:
+            sock = socket.create_server((host, port), family=family, backlog=128)
+        except OSError as exc:
+            reason = f"cannot listen on {self.model.listen}: {exc.strerror or exc}"
+            raise ConfigError([("modbus.listen", reason)]) from exc
+        bound = sock.getsockname()
+        self._address = (str(bound[0]), int(bound[1]))
+        self._server = await asyncio.start_server(self._connection, sock=sock)
+        log.info(
+            "modbus.listening",
+            host=self._address[0],
+            port=self._address[1],
+            units=len(self.map.units),
+            commands=self.model.commands,
+            allow=self.model.allow or ["loopback"],
+        )
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        server, self._server = self._server, None
+        if server is None:
+            return
+        server.close()
+        if self._connections:  # writes in progress may still get their answer
+            await asyncio.wait(self._connections, timeout=SHUTDOWN_GRACE_S)
+        for task in list(self._connections):
+            task.cancel()
+        if self._connections:
+            await asyncio.wait(self._connections)
+        await server.wait_closed()
+        self._address = None
+        log.info("modbus.stopped")
+
+    # -- connections ---------------------------------------------------------------------
+
+    def _allowed(self, host: str) -> bool:
+        try:
+            address = ipaddress.ip_address(host.partition("%")[0])
+        except ValueError:
+            return False
+        if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
+            address = address.ipv4_mapped
+        if not self._allow:
+            return address.is_loopback
+        return any(address in network for network in self._allow)
+
+    async def _connection(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        peer = writer.get_extra_info("peername") or ("?", 0)
+        host, port = str(peer[0]), int(peer[1])
+        actor = f"modbus:[{host}]:{port}" if ":" in host else f"modbus:{host}:{port}"
+        task = asyncio.current_task()
+        if not self._allowed(host) or len(self._connections) >= MAX_CONNECTIONS:
+            why = "not in modbus.allow" if not self._allowed(host) else "too many connections"
+            log.warning("modbus.client_refused", client=actor, reason=why)
+            writer.close()
+            return
+        assert task is not None
+        self._connections.add(task)
+        log.info("modbus.client_connected", client=actor)
+        try:
+            await self._serve(reader, writer, actor)
+        except (ConnectionError, TimeoutError) as exc:
+            log.info("modbus.client_dropped", client=actor, reason=repr(exc))
+        except Exception:  # a bug must cost this connection only, never the server
+            log.exception("modbus.connection_failed", client=actor)
+        finally:
+            self._connections.discard(task)
+            writer.close()
+            log.info("modbus.client_disconnected", client=actor)
+
+    async def _serve(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, actor: str
+    ) -> None:
+        framer = MbapFramer()
+        while True:
+            item = framer.next_item()
+            if item is None:
+                if framer.pending:  # a frame begun must be finished in time
+                    async with asyncio.timeout(self.partial_frame_s):
+                        data = await reader.read(READ_CHUNK)
+                else:
+                    data = await reader.read(READ_CHUNK)
+                if not data:
+                    return
+                framer.feed(data)
+                continue
+            if isinstance(item, Broken):
+                log.warning(
+                    "modbus.frame_rejected", client=actor, reason=item.reason,
+                    frame=item.data[:16].hex(" "),
+                )  # fmt: skip
+                return
+            answer = await self._answer(item, actor)
+            writer.write(answer)
+            async with asyncio.timeout(SEND_TIMEOUT_S):
+                await writer.drain()
+
+    # -- requests ------------------------------------------------------------------------
+
+    async def _answer(self, item: Request | Refusal, actor: str) -> bytes:
+        if isinstance(item, Refusal):
+            log.info("modbus.request_refused", client=actor, unit=item.unit, reason=item.reason)
+            return encode_exception(item.transaction, item.unit, item.function, item.code)
+        try:
+            unit = self.map.units.get(item.unit)
+            if unit is None:
+                raise _Refused(ExceptionCode.GATEWAY_PATH_UNAVAILABLE)
+            if item.function in (Function.READ_INPUT, Function.READ_HOLDING):
+                return encode_registers(item, self._read(unit, item))
+            await self._write(unit, item, actor)
+            return encode_written(item)
+        except _Refused as refused:
+            return encode_exception(item.transaction, item.unit, item.function, refused.code)
+        except Exception:  # a bug below must not take the server down: say so, keep serving
+            log.exception("modbus.request_failed", client=actor, unit=item.unit)
+            code = ExceptionCode.SERVER_DEVICE_FAILURE
+            return encode_exception(item.transaction, item.unit, item.function, code)
+
+    def _read(self, unit: UnitMap, request: Request) -> list[int]:
+        table = "input" if request.function is Function.READ_INPUT else "holding"
+        if request.address + request.count > unit.size(table):
+            raise _Refused(ExceptionCode.ILLEGAL_DATA_ADDRESS)
+        state = self.gateway.fleet.get(unit.bus, unit.drive.name)
+        if state is None:
+            raise _Refused(ExceptionCode.GATEWAY_PATH_UNAVAILABLE)
+        words = unit.words(table, state, self._wall())
+        return words[request.address : request.address + request.count]
+
+    async def _write(self, unit: UnitMap, request: Request, actor: str) -> None:
+        drive = unit.drive.name
+        if not self.model.commands:
+            self._refuse(actor, drive, "modbus.commands is false: the registers are read-only")
+            raise _Refused(ExceptionCode.ILLEGAL_FUNCTION)
+        if request.address + request.count > unit.size("holding"):
+            self._refuse(actor, drive, f"no holding register {request.address + request.count - 1}")
+            raise _Refused(ExceptionCode.ILLEGAL_DATA_ADDRESS)
+        written = dict(enumerate(request.values, start=request.address))
+        for payload in self._payloads(written, actor, drive):
+            try:
+                command = parse_command(payload, unit.drive, actor=actor)
+            except UsageError as exc:
+                self._refuse(actor, drive, str(exc))
+                raise _Refused(ExceptionCode.ILLEGAL_DATA_VALUE) from None
+            result: CommandResult = await self.gateway.execute(drive, command)
+            if not result.ok:
+                outcome = result.outcome.value
+                raise _Refused(EXCEPTION_OF.get(outcome, ExceptionCode.SERVER_DEVICE_FAILURE))
+
+    def _payloads(self, written: dict[int, int], actor: str, drive: str) -> list[dict[str, Any]]:
+        """The commands a write of holding registers asks for (see the module docstring)."""
+        code = written.get(COMMAND_ADDRESS)
+        reference = written.get(REFERENCE_ADDRESS)
+        set_reference = []
+        frequency: dict[str, Any] = {}
+        if reference is not None:
+            frequency = {"frequency_hz": reference / 10**REFERENCE_DECIMALS}
+            set_reference = [{"action": "set_reference", **frequency}]
+        if code is None or code == 0:
+            return set_reference
+        action = ACTIONS.get(code)
+        if action is None:
+            known = ", ".join(f"{c} {a}" for c, a in ACTIONS.items())
+            self._refuse(actor, drive, f"command {code} is no action code ({known})")
+            raise _Refused(ExceptionCode.ILLEGAL_DATA_VALUE)
+        if action == "start":
+            return [{"action": "start", **frequency}]
+        return [{"action": action}, *set_reference]
+
+    @staticmethod
+    def _refuse(actor: str, drive: str, reason: str) -> None:
+        log.info("modbus.command_refused", actor=actor, drive=drive, reason=reason)
