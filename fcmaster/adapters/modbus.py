@@ -112,15 +112,18 @@ class ModbusAdapter:
         demo: bool = False,
         wall: Callable[[], float] = time.time,
         partial_frame_s: float = PARTIAL_FRAME_S,
+        shutdown_grace_s: float = SHUTDOWN_GRACE_S,
     ) -> None:
         self.model = model
         self.partial_frame_s = partial_frame_s
+        self.shutdown_grace_s = shutdown_grace_s
         self.gateway = gateway
         self.map = register_map(config)
         self._wall = wall
         self._allow = tuple(ipaddress.ip_network(n, strict=False) for n in model.allow or ())
         self._server: asyncio.Server | None = None
         self._connections: set[asyncio.Task[None]] = set()
+        self._busy: set[asyncio.Task[None]] = set()  # answering a request right now
         self._address: tuple[str, int] | None = None
 
     @property
@@ -143,7 +146,7 @@ class ModbusAdapter:
             raise ConfigError([("modbus.listen", reason)]) from exc
         bound = sock.getsockname()
         self._address = (str(bound[0]), int(bound[1]))
-        self._server = await asyncio.start_server(self._connection, sock=sock)
+        self._server = await asyncio.start_server(self._accept, sock=sock)
         log.info(
             "modbus.listening",
             host=self._address[0],
@@ -164,8 +167,13 @@ class ModbusAdapter:
         if server is None:
             return
         server.close()
-        if self._connections:  # writes in progress may still get their answer
-            await asyncio.wait(self._connections, timeout=SHUTDOWN_GRACE_S)
+        # Idle connections end now; a write in progress may still get its answer (the
+        # lines are still up: the service closes them after its adapters). What is still
+        # going after the grace is cancelled and answered GATEWAY_PATH_UNAVAILABLE.
+        for task in self._connections - self._busy:
+            task.cancel()
+        if self._busy:
+            await asyncio.wait(self._busy, timeout=self.shutdown_grace_s)
         for task in list(self._connections):
             task.cancel()
         if self._connections:
@@ -187,18 +195,28 @@ class ModbusAdapter:
             return address.is_loopback
         return any(address in network for network in self._allow)
 
-    async def _connection(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        """A new connection: closed at once, or served by a task of its own.
+
+        The task is ours rather than the server's, so the adapter can end it at shutdown.
+        """
         peer = writer.get_extra_info("peername") or ("?", 0)
         host, port = str(peer[0]), int(peer[1])
         actor = f"modbus:[{host}]:{port}" if ":" in host else f"modbus:{host}:{port}"
-        task = asyncio.current_task()
         if not self._allowed(host) or len(self._connections) >= MAX_CONNECTIONS:
             why = "not in modbus.allow" if not self._allowed(host) else "too many connections"
             log.warning("modbus.client_refused", client=actor, reason=why)
             writer.close()
             return
-        assert task is not None
+        task = asyncio.create_task(
+            self._connection(reader, writer, actor), name=f"modbus.client[{actor}]"
+        )
         self._connections.add(task)
+        task.add_done_callback(self._connections.discard)
+
+    async def _connection(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, actor: str
+    ) -> None:
         log.info("modbus.client_connected", client=actor)
         try:
             await self._serve(reader, writer, actor)
@@ -207,7 +225,6 @@ class ModbusAdapter:
         except Exception:  # a bug must cost this connection only, never the server
             log.exception("modbus.connection_failed", client=actor)
         finally:
-            self._connections.discard(task)
             writer.close()
             log.info("modbus.client_disconnected", client=actor)
 
@@ -233,7 +250,17 @@ class ModbusAdapter:
                     frame=item.data[:16].hex(" "),
                 )  # fmt: skip
                 return
-            answer = await self._answer(item, actor)
+            task = asyncio.current_task()
+            assert task is not None
+            self._busy.add(task)
+            try:
+                answer = await self._answer(item, actor)
+            except asyncio.CancelledError:  # shutdown: the request still gets its one answer
+                code = ExceptionCode.GATEWAY_PATH_UNAVAILABLE
+                writer.write(encode_exception(item.transaction, item.unit, item.function, code))
+                raise
+            finally:
+                self._busy.discard(task)
             writer.write(answer)
             async with asyncio.timeout(SEND_TIMEOUT_S):
                 await writer.drain()

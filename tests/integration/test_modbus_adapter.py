@@ -251,3 +251,39 @@ async def test_a_frame_split_into_single_bytes_is_still_one_request() -> None:
             await asyncio.sleep(0.005)
         transaction, unit, pdu = await client.receive_frame()
         assert (transaction, unit, pdu[:2]) == (9, 2, bytes((4, 4)))
+
+
+async def test_shutdown_ends_idle_clients_at_once_and_answers_a_pending_write_0x0a() -> None:
+    gate = Gate()
+    config = parse(CONFIG)
+    model = ModbusModel(listen="127.0.0.1:0", commands=True)
+    adapter = ModbusAdapter(model, FakeGateway(config.lines, gate), config=config,
+                            shutdown_grace_s=0.3)  # fmt: skip
+    loop = asyncio.get_running_loop()
+    async with asyncio.timeout(LIMIT_S):
+        async with adapter:  # the clients outlive the server
+            idle = await Client(*adapter.address).__aenter__()
+            busy = await Client(*adapter.address).__aenter__()
+            assert (await idle.read_input(1, 0, 1)) == [0]
+            write = asyncio.create_task(busy.write_single(1, 0, 1))
+            await gate.arrived.get()
+            started = loop.time()
+        assert 0.3 <= loop.time() - started < 2.0  # the grace, not forever
+        with pytest.raises(ModbusError) as cancelled:
+            await write
+        assert cancelled.value.code == 0x0A
+        assert await idle.closed_by_server()
+        assert await busy.closed_by_server()
+        for client in (idle, busy):
+            await client.__aexit__(None, None, None)
+
+
+async def test_an_idle_client_does_not_hold_up_shutdown() -> None:
+    loop = asyncio.get_running_loop()
+    async with asyncio.timeout(LIMIT_S), serving() as (_, adapter):
+        client = await Client(*adapter.address).__aenter__()
+        assert (await client.read_input(1, 0, 1)) == [0]
+        started = loop.time()
+    assert loop.time() - started < 1.0  # an idle connection is not waited for
+    assert await client.closed_by_server()
+    await client.__aexit__(None, None, None)
