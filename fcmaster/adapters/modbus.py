@@ -269,7 +269,7 @@ class ModbusAdapter:
 
     async def _answer(self, item: Request | Refusal, actor: str) -> bytes:
         if isinstance(item, Refusal):
-            log.info("modbus.request_refused", client=actor, unit=item.unit, reason=item.reason)
+            log.debug("modbus.request_refused", client=actor, unit=item.unit, reason=item.reason)
             return encode_exception(item.transaction, item.unit, item.function, item.code)
         try:
             unit = self.map.units.get(item.unit)

@@ -89,9 +89,10 @@ class Register:
     def encode(self, value: float | None) -> list[int]:
         """The register words for ``value`` (None, NaN or out of range: the unknown mark)."""
         if self.type == "f32":
-            if value is None:
+            try:
+                return list(struct.unpack(">HH", struct.pack(">f", value)))
+            except (OverflowError, struct.error):  # None, or beyond what a float32 holds
                 return list(_NAN)
-            return list(struct.unpack(">HH", struct.pack(">f", value)))
         if value is None or not math.isfinite(value):
             return list(_UNKNOWN[self.type])
         raw = round(value * 10**self.decimals)

@@ -7,12 +7,16 @@ The client here is written from the specification (tests/integration/modbus_clie
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 
 import pytest
 from structlog.testing import capture_logs
 
+from fcmaster import config
+from fcmaster.service import Service
 from tests.integration.modbus_client import Client, ModbusError, f32, i32, is_nan
 from tests.integration.modbus_harness import Plant, plant
+from tests.integration.ports import free_port
 from tests.integration.waiting import wait_for
 
 LIMIT_S = 30.0
@@ -189,3 +193,46 @@ async def test_an_offline_drive_reads_online_0_its_age_and_unknown_values() -> N
         assert (await client.read_holding(11, 1, 1)) == [0xFFFF]
         assert state is not None
         assert state.online  # the snapshot read before stays as it was: immutable
+
+
+async def test_a_silent_drive_answers_0x0b_and_a_line_that_is_down_0x0a() -> None:
+    silent = "{drives: {1: {faults: silent_at=3-300}}}"
+    async with (
+        asyncio.timeout(LIMIT_S),
+        plant(line2=silent) as running,
+        Client(HOST, running.port) as client,
+    ):
+        await wait_for(lambda: not running.service.fleet.get("line2", "pump-3").online, 15)  # type: ignore[union-attr]
+        with pytest.raises(ModbusError) as no_answer:
+            await client.write_single(11, 0, 2)  # stop: tried, retried, no answer
+        assert no_answer.value.code == 0x0B
+
+
+async def test_a_write_to_a_drive_on_a_line_that_is_down_answers_0x0a(tmp_path: Path) -> None:
+    port = free_port()
+    text = f"""
+buses:
+  - name: line1
+    port: {tmp_path / "no-such-adapter"}
+    drives: [{{name: pump-1, address: 1, control: bus}}]
+modbus: {{listen: "127.0.0.1:{port}", commands: true}}
+"""
+    service = Service(config.parse(text))
+    task = asyncio.create_task(service.run(install_signals=False))
+    try:
+        async with asyncio.timeout(LIMIT_S):
+            while True:  # until the server listens (the line keeps failing to open)
+                try:
+                    client = await Client(HOST, port).__aenter__()
+                    break
+                except OSError:
+                    await asyncio.sleep(0.05)
+            words = await client.read_input(1, 0, 2)
+            assert words == [0, 0xFFFF]  # never answered
+            with pytest.raises(ModbusError) as down:
+                await client.write_single(1, 0, 1)
+            assert down.value.code == 0x0A
+            await client.__aexit__(None, None, None)
+    finally:
+        service.stop()
+        await task

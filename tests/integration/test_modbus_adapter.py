@@ -4,6 +4,8 @@ answers, hostile and broken clients."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import random
 import struct
 import time
 from collections.abc import AsyncIterator, Callable
@@ -287,3 +289,33 @@ async def test_an_idle_client_does_not_hold_up_shutdown() -> None:
     assert loop.time() - started < 1.0  # an idle connection is not waited for
     assert await client.closed_by_server()
     await client.__aexit__(None, None, None)
+
+
+async def test_random_bytes_from_many_clients_never_take_the_server_down() -> None:
+    rng = random.Random(20)
+    header = bytes.fromhex("0001 0000 0006 01")
+
+    def garbage() -> bytes:
+        kind = rng.randrange(3)
+        if kind == 0:  # anything at all
+            return rng.randbytes(rng.randrange(1, 300))
+        if kind == 1:  # a good header, a random PDU of the length it announces
+            pdu = rng.randbytes(rng.randrange(1, 253))
+            return struct.pack(">HHHB", rng.randrange(65536), 0, len(pdu) + 1, 1) + pdu
+        return header + rng.randbytes(rng.randrange(0, 5))  # cut short
+
+    with capture_logs() as logs:
+        async with serving(partial_frame_s=0.3) as (gateway, adapter):
+
+            async def hostile() -> None:
+                async with Client(*adapter.address, timeout_s=5.0) as client:
+                    for _ in range(5):
+                        await client.send_raw(garbage())
+                    with contextlib.suppress(ConnectionError, asyncio.IncompleteReadError):
+                        await client.closed_by_server()  # answers, then EOF, or a reset
+
+            await asyncio.gather(*(hostile() for _ in range(40)))
+            async with Client(*adapter.address) as good:
+                assert (await good.read_input(1, 0, 1)) == [0]
+    assert not [e for e in logs if e["log_level"] in ("error", "critical")]
+    assert all(command.actor.startswith("modbus:") for _, command in gateway.executed)

@@ -63,3 +63,18 @@ def test_listening_beyond_loopback_needs_an_allow_list_and_bad_networks_are_name
     assert parse(text + "modbus: {listen: 0.0.0.0:502, allow: [10.0.5.0/24]}\n").model.modbus
     found = problems(text + "modbus: {listen: '10.0.0.1', allow: [10.0.0.0/8, 10.0.0.300]}\n")
     assert [p for p, _ in found] == ["modbus.listen", "modbus.allow[1]"]
+
+
+@pytest.mark.parametrize("listen", ["[::1]:5020", "localhost:5020", "127.0.0.2:502"])
+def test_loopback_listen_addresses_need_no_allow_list(listen: str) -> None:
+    text = TWO_LINES.replace("{name: fan-1, address: 1}", "{name: fan-1, address: 3}")
+    model = parse(text + f'modbus: {{listen: "{listen}"}}\n').model.modbus
+    assert model is not None
+    assert model.listen == listen
+
+
+@pytest.mark.parametrize("listen", ["127.0.0.1", "127.0.0.1:x", ":5020", "127.0.0.1:70000"])
+def test_a_listen_address_without_a_usable_port_is_refused(listen: str) -> None:
+    text = TWO_LINES.replace("{name: fan-1, address: 1}", "{name: fan-1, address: 3}")
+    found = problems(text + f'modbus: {{listen: "{listen}"}}\n')
+    assert found[0][0] == "modbus.listen"

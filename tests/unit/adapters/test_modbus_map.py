@@ -111,3 +111,8 @@ def test_every_outcome_has_the_exception_design_maps_it_to() -> None:
     assert {o.value for o in Outcome} - {"done"} <= set(EXCEPTION_OF)
     assert EXCEPTION_OF["superseded"] == EXCEPTION_OF["unconfirmed"] == ExceptionCode(4)
     assert (EXCEPTION_OF["timeout"], EXCEPTION_OF["cancelled"]) == (0x0B, 0x0A)
+
+
+def test_a_float_beyond_float32_reads_nan() -> None:
+    state = dataclasses.replace(ONLINE, values={"16-14": Measured(1e40, "A", 1)})
+    assert math.isnan(struct.unpack(">f", struct.pack(">HH", *words(state)[16:18]))[0])
