@@ -34,6 +34,7 @@ given :data:`PARTIAL_FRAME_S` to be completed.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import ipaddress
 import socket
 import time
@@ -124,6 +125,9 @@ class ModbusAdapter:
         self._server: asyncio.Server | None = None
         self._connections: set[asyncio.Task[None]] = set()
         self._busy: set[asyncio.Task[None]] = set()  # answering a request right now
+        self._quiet = asyncio.Event()  # set while no request is being answered
+        self._quiet.set()
+        self._closing = False
         self._address: tuple[str, int] | None = None
 
     @property
@@ -136,6 +140,7 @@ class ModbusAdapter:
     async def __aenter__(self) -> ModbusAdapter:
         if self._server is not None:
             raise RuntimeError("the Modbus adapter is already running")
+        self._closing = False
         host, port = modbus_listen(self.model.listen)
         assert port is not None  # the config checked it
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -168,12 +173,15 @@ class ModbusAdapter:
             return
         server.close()
         # Idle connections end now; a write in progress may still get its answer (the
-        # lines are still up: the service closes them after its adapters). What is still
-        # going after the grace is cancelled and answered GATEWAY_PATH_UNAVAILABLE.
+        # lines are still up: the service closes them after its adapters), and then its
+        # connection ends. What is still going after the grace is cancelled and answered
+        # GATEWAY_PATH_UNAVAILABLE.
+        self._closing = True
         for task in self._connections - self._busy:
             task.cancel()
-        if self._busy:
-            await asyncio.wait(self._busy, timeout=self.shutdown_grace_s)
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(self.shutdown_grace_s):
+                await self._quiet.wait()
         for task in list(self._connections):
             task.cancel()
         if self._connections:
@@ -244,6 +252,8 @@ class ModbusAdapter:
                     return
                 framer.feed(data)
                 continue
+            if self._closing:
+                return
             if isinstance(item, Broken):
                 log.warning(
                     "modbus.frame_rejected", client=actor, reason=item.reason,
@@ -253,6 +263,7 @@ class ModbusAdapter:
             task = asyncio.current_task()
             assert task is not None
             self._busy.add(task)
+            self._quiet.clear()
             try:
                 answer = await self._answer(item, actor)
             except asyncio.CancelledError:  # shutdown: the request still gets its one answer
@@ -261,7 +272,11 @@ class ModbusAdapter:
                 raise
             finally:
                 self._busy.discard(task)
+                if not self._busy:
+                    self._quiet.set()
             writer.write(answer)
+            if self._closing:  # the answer goes out as the connection closes
+                return
             async with asyncio.timeout(SEND_TIMEOUT_S):
                 await writer.drain()
 

@@ -319,3 +319,23 @@ async def test_random_bytes_from_many_clients_never_take_the_server_down() -> No
                 assert (await good.read_input(1, 0, 1)) == [0]
     assert not [e for e in logs if e["log_level"] in ("error", "critical")]
     assert all(command.actor.startswith("modbus:") for _, command in gateway.executed)
+
+
+async def test_shutdown_lets_a_write_finish_within_the_grace_and_answers_it() -> None:
+    gate = Gate()
+    config = parse(CONFIG)
+    model = ModbusModel(listen="127.0.0.1:0", commands=True)
+    adapter = ModbusAdapter(model, FakeGateway(config.lines, gate), config=config,
+                            shutdown_grace_s=10.0)  # fmt: skip
+    loop = asyncio.get_running_loop()
+    async with asyncio.timeout(LIMIT_S):
+        async with adapter:
+            busy = await Client(*adapter.address).__aenter__()
+            write = asyncio.create_task(busy.write_single(1, 0, 2))
+            await gate.arrived.get()
+            loop.call_later(0.2, gate.release, "pump-1", "stop")
+            started = loop.time()
+        assert loop.time() - started < 5.0  # the write's end, not the 10 s grace
+        await write  # answered normally
+        assert await busy.closed_by_server()
+        await busy.__aexit__(None, None, None)
