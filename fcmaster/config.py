@@ -390,7 +390,7 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
     if model.modbus is not None:
         modbus_units(model, problems)
         host, _ = modbus_listen(model.modbus.listen)
-        if model.modbus.allow is None and not _is_loopback(host):
+        if not model.modbus.allow and not _is_loopback(host):  # [] lets no PLC in either
             problems.append(
                 (
                     "modbus.listen",

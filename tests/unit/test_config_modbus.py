@@ -61,6 +61,7 @@ def test_listening_beyond_loopback_needs_an_allow_list_and_bad_networks_are_name
     assert "modbus.allow" in reason
     text = TWO_LINES.replace("{name: fan-1, address: 1}", "{name: fan-1, address: 3}")
     assert parse(text + "modbus: {listen: 0.0.0.0:502, allow: [10.0.5.0/24]}\n").model.modbus
+    assert problems(text + "modbus: {listen: 0.0.0.0:502, allow: []}\n")[0][0] == "modbus.listen"
     found = problems(text + "modbus: {listen: '10.0.0.1', allow: [10.0.0.0/8, 10.0.0.300]}\n")
     assert [p for p, _ in found] == ["modbus.listen", "modbus.allow[1]"]
 
