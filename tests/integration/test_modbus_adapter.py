@@ -339,3 +339,22 @@ async def test_shutdown_lets_a_write_finish_within_the_grace_and_answers_it() ->
         await write  # answered normally
         assert await busy.closed_by_server()
         await busy.__aexit__(None, None, None)
+
+
+@pytest.mark.parametrize(
+    ("code", "action"),
+    [
+        (1, Action.START),
+        (2, Action.STOP),
+        (3, Action.COAST),
+        (4, Action.QUICK_STOP),
+        (5, Action.RESET),
+        (6, Action.FORWARD),
+        (7, Action.REVERSE),
+        (8, Action.JOG),
+    ],
+)
+async def test_each_action_code_is_the_action_design_names(code: int, action: Action) -> None:
+    async with serving() as (gateway, adapter), Client(*adapter.address) as client:
+        await client.write_single(1, 0, code)
+    assert [(d, c.action) for d, c in gateway.executed] == [("pump-1", action)]

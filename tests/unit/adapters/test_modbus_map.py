@@ -7,10 +7,12 @@ import math
 import struct
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from fcmaster.adapters.modbus import EXCEPTION_OF
 from fcmaster.adapters.modbus_frames import ExceptionCode
-from fcmaster.adapters.modbus_map import register_map
+from fcmaster.adapters.modbus_map import Register, register_map
 from fcmaster.bus.commands import Outcome
 from fcmaster.config import parse
 from fcmaster.errors import ConfigError
@@ -116,3 +118,18 @@ def test_every_outcome_has_the_exception_design_maps_it_to() -> None:
 def test_a_float_beyond_float32_reads_nan() -> None:
     state = dataclasses.replace(ONLINE, values={"16-14": Measured(1e40, "A", 1)})
     assert math.isnan(struct.unpack(">f", struct.pack(">HH", *words(state)[16:18]))[0])
+
+
+@given(st.integers(0, 0xFFFE), st.sampled_from([0, 1, 2]))
+def test_a_u16_value_comes_back_from_its_register(raw: int, decimals: int) -> None:
+    register = Register(table="input", address=0, name="x", type="u16", decimals=decimals,
+                        read=lambda _s, _n: None)  # fmt: skip
+    (word,) = register.encode(raw / 10**decimals)
+    assert word == raw
+
+
+@given(st.integers(-0x7FFFFFFF, 0x7FFFFFFF))
+def test_an_i32_is_its_twos_complement_high_word_first(value: int) -> None:
+    register = Register(table="input", address=0, name="x", type="i32", read=lambda _s, _n: None)
+    high, low = register.encode(value)
+    assert struct.unpack(">i", struct.pack(">HH", high, low))[0] == value
