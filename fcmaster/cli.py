@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import sys
 from collections.abc import Callable, Coroutine
 from pathlib import Path
@@ -32,10 +33,26 @@ def _addresses(text: str) -> list[int]:
     try:
         for part in text.split(","):
             first, _, last = part.strip().partition("-")
-            out.extend(range(int(first), int(last or first) + 1))
+            low, high = int(first), int(last or first)
+            if high < low:
+                raise argparse.ArgumentTypeError(
+                    f"{part.strip()!r} runs backwards; write {high}-{low}"
+                )
+            out.extend(range(low, high + 1))
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not like 1-126 or 1,4,7") from None
     return out
+
+
+def _seconds(text: str) -> float:
+    """A positive, finite number of seconds (``--timeout``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number of seconds")
+    return value
 
 
 def _line_options(parser: argparse.ArgumentParser) -> None:
@@ -46,7 +63,7 @@ def _line_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--parity", choices=("N", "E", "O"))
     parser.add_argument("--stopbits", type=int, choices=(1, 2))
     parser.add_argument("--address-format", type=int, choices=(31, 126), default=126)
-    parser.add_argument("--timeout", type=float, help="reply deadline in seconds")
+    parser.add_argument("--timeout", type=_seconds, help="reply deadline in seconds")
     parser.add_argument(
         "--terminator", choices=("none", "cr", "crlf"), default="cr",
         help="mitsubishi: as the drives' Pr.124 (default cr)",
@@ -106,7 +123,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     scan = commands.add_parser("scan", help="find which addresses answer")
     _line_options(scan)
-    scan.add_argument("--addresses", type=_addresses, help="default: every address")
+    scan.add_argument(
+        "--addresses", type=_addresses, help="default: every address the protocol can reach"
+    )
     scan.add_argument("--json", action="store_true", help="print JSON")
 
     status = commands.add_parser("status", help="one drive's decoded status now")
@@ -139,7 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     reference = control.add_mutually_exclusive_group()
     reference.add_argument("--frequency", type=float, help="Hz")
-    reference.add_argument("--reference", type=float, help="% of the nominal frequency")
+    reference.add_argument("--reference", type=float, help="%% of the nominal frequency")
     control.add_argument("--nominal-frequency", type=float, default=50.0, help="Hz at 100 %%")
     control.add_argument("--max-frequency", type=float, help="refuse more (default: nominal)")
 
@@ -221,11 +240,9 @@ def _options(args: argparse.Namespace) -> Any:
 def _cmd_run(args: argparse.Namespace) -> int:
     from fcmaster.commands import daemon
 
-    return _run_async(
-        daemon.run(
-            args.config or DEMO_CONFIG, demo=args.config is None, http_listen=args.http_listen
-        )
-    )
+    config = args.config or DEMO_CONFIG
+    demo = config.resolve() == DEMO_CONFIG  # also when named as config/demo.yaml
+    return _run_async(daemon.run(config, demo=demo, http_listen=args.http_listen))
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
@@ -237,9 +254,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _cmd_scan(args: argparse.Namespace) -> int:
     from fcmaster.commands import commission
 
-    every = range(0, 32) if args.protocol == "mitsubishi" else range(1, 127)  # stations 0-31
-    addresses = args.addresses or list(every)
-    return _run_async(commission.scan(_options(args), addresses, as_json=args.json))
+    return _run_async(commission.scan(_options(args), args.addresses, as_json=args.json))
 
 
 def _cmd_status(args: argparse.Namespace) -> int:

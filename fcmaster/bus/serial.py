@@ -30,6 +30,7 @@ import serial.rs485
 import serial_asyncio_fast
 import structlog
 
+from fcmaster.bus.open_errors import open_error
 from fcmaster.errors import PortError, ReplyTimeout
 
 log = structlog.get_logger("fcmaster.bus")
@@ -203,10 +204,7 @@ class SerialTransport:
                         loop, lambda: receiver, instance
                     )
         except (serial.SerialException, OSError, ValueError, termios.error) as exc:
-            raise PortError(
-                f"cannot open {self.port}: {exc} (check the device path, and that this user "
-                "may use it, e.g. is in the dialout group)"
-            ) from exc
+            raise PortError(open_error(self.port, exc)) from exc
         self._transport = transport
 
     def _open_serial(self) -> serial.Serial:

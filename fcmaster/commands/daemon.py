@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import errno
+import socket
 from pathlib import Path
 
 import structlog
@@ -79,6 +81,29 @@ def with_http_listen(config: config_module.Config, listen: str) -> config_module
     return dataclasses.replace(config, model=model)
 
 
+def check_listen(listen: str, *, overridden: bool) -> None:
+    """UsageError now, before any line is opened, if the HTTP address cannot be had.
+
+    A trial bind with the options the HTTP adapter's own bind uses; it is closed at once.
+    The adapter still reports a port taken in between, as the config's problem.
+    """
+    from fcmaster.adapters.http import parse_listen
+
+    host, port = parse_listen(listen)
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    try:
+        socket.create_server((host, port), family=family).close()
+    except OSError as exc:
+        where = "--http-listen" if overridden else "http.listen"
+        taken = exc.errno == errno.EADDRINUSE
+        reason = "it is taken (another fcmaster?)" if taken else (exc.strerror or str(exc))
+        other = port + 1 if 0 < port < 65535 else 8081
+        raise UsageError(
+            f"cannot serve HTTP at {host}:{port} ({where}): {reason}; "
+            f"pass --http-listen {host}:{other} to use another port"
+        ) from exc
+
+
 async def run(path: Path, *, demo: bool, http_listen: str | None = None) -> int:
     """Run the daemon until SIGTERM/SIGINT (``http_listen`` overrides ``http.listen``)."""
     from fcmaster.service import Service
@@ -86,6 +111,8 @@ async def run(path: Path, *, demo: bool, http_listen: str | None = None) -> int:
     config = config_module.load(path)
     if http_listen is not None:
         config = with_http_listen(config, http_listen)
+    if config.model.http is not None:
+        check_listen(config.model.http.listen, overridden=http_listen is not None)
     logsetup.configure(config.model.logging.level, config.model.logging.format)
     log.info("config.loaded", path=str(path), demo=demo, http_listen=http_listen)
     await Service(config, demo=demo).run()

@@ -64,7 +64,7 @@ def config_buses(path: Path, *, only: Sequence[str] | None = None) -> list[SimBu
     names the buses to serve (default: all of them), so one line can be served by a
     process of its own and taken away (an unplugged adapter) while the others stay.
     """
-    config = load(path)
+    config = load(path, buses_only=True)  # the daemon's secrets are no business of ours
     if only:
         unknown = sorted(set(only) - {plan.name for plan in config.lines})
         if unknown:

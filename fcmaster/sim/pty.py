@@ -208,9 +208,18 @@ class PtyServer:
 
 
 def _replace_link(target: str, link: str) -> None:
-    """Point ``link`` at ``target``, replacing an old symlink but never a real file."""
+    """Point ``link`` at ``target``; only a dangling symlink (a killed server's) is replaced.
+
+    A link that leads somewhere may be a real adapter's (``/dev/serial/by-id/…``) or another
+    server's pty: taking it over would hide that device, and removing it on exit lose it.
+    """
     if os.path.lexists(link) and not os.path.islink(link):
         raise PortError(f"{link} exists and is not a symbolic link; not replacing it")
+    if os.path.exists(link):  # follows the link: it leads to something
+        raise PortError(
+            f"{link} already links to {os.path.realpath(link)}; not replacing it "
+            "(remove it, or simulate the line at another path)"
+        )
     temporary = f"{link}.{os.getpid()}.tmp"
     os.symlink(target, temporary)
     os.replace(temporary, link)
