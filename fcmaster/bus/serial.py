@@ -30,6 +30,7 @@ import serial.rs485
 import serial_asyncio_fast
 import structlog
 
+from fcmaster.bus.adapter import Adapter, tune
 from fcmaster.bus.open_errors import open_error
 from fcmaster.errors import PortError, ReplyTimeout
 
@@ -178,6 +179,7 @@ class SerialTransport:
             "bytesize": databits,
         }
         self._rs485 = rs485
+        self.adapter: Adapter | None = None  # the USB adapter behind a local port, once open
         self._receiver = _Receiver()
         self._transport: _Port | None = None
 
@@ -220,6 +222,8 @@ class SerialTransport:
                 rts_level_for_tx=True, rts_level_for_rx=False
             )
         instance.open()
+        if os.name == "posix" and type(instance) is serial.Serial:
+            self.adapter = tune(self.port, instance.fileno())  # once per open, not per read
         return instance
 
     async def close(self) -> None:
