@@ -188,6 +188,12 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--response-delay-ms", type=float, help="every drive's 8-35 (default 10)")
     _encoding_options(sim)
 
+    ports = commands.add_parser(
+        "ports", help="this machine's serial adapters: stable names, driver, latency timer"
+    )
+    ports.add_argument("--config", type=Path, help="also say which bus uses each adapter")
+    ports.add_argument("--json", action="store_true", help="print JSON")
+
     monitor = commands.add_parser("monitor", help="a running daemon's fleet as a live table")
     monitor.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
     monitor.add_argument("--token", help="a viewer token (default: $FCM_TOKEN)")
@@ -318,6 +324,12 @@ def _cmd_decode(args: argparse.Namespace) -> int:
     )
 
 
+def _cmd_ports(args: argparse.Namespace) -> int:
+    from fcmaster.commands import ports
+
+    return ports.run(args.config, as_json=args.json)
+
+
 def _cmd_monitor(args: argparse.Namespace) -> int:
     from fcmaster.commands import monitor
 
@@ -335,13 +347,14 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "decode": _cmd_decode,
     "sim": _cmd_sim,
     "monitor": _cmd_monitor,
+    "ports": _cmd_ports,
 }
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     args = build_parser().parse_args(argv)
-    if args.command not in ("run", "decode", "check"):
+    if args.command not in ("run", "decode", "check", "ports"):
         from fcmaster import logsetup
 
         logsetup.configure("warning")  # commissioning tools: only what needs attention

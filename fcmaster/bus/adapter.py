@@ -117,8 +117,18 @@ class Machine:
 
     def driver(self, name: str) -> str | None:
         """The kernel driver of tty ``name`` (ftdi_sio, …), if sysfs names one."""
-        link = self.sys / "class" / "tty" / name / "device" / "driver"
-        return os.path.basename(os.readlink(link)) if link.is_symlink() else None
+        # Since Linux 6.2 a UART's tty hangs on a "port" device of the serial-base bus, whose
+        # driver says nothing: the port's own driver is further up.
+        device = Path(os.path.realpath(self.sys / "class" / "tty" / name / "device"))
+        for _ in range(3):
+            link = device / "driver"
+            if not link.is_symlink():
+                return None
+            target = os.path.realpath(link)
+            if os.path.basename(os.path.dirname(os.path.dirname(target))) != "serial-base":
+                return os.path.basename(target)
+            device = device.parent.parent  # port device → serial-base controller → hardware
+        return None
 
     def latency_file(self, name: str) -> Path:
         """Where a USB serial driver keeps tty ``name``'s latency timer, in ms."""

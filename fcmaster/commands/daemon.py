@@ -11,8 +11,10 @@ import structlog
 
 from fcmaster import config as config_module
 from fcmaster import logsetup
+from fcmaster.bus.adapter import Machine
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import LinePlan
+from fcmaster.commands.ports import unstable_ports
 from fcmaster.errors import ConfigError, UsageError
 
 log = structlog.get_logger("fcmaster.cli")
@@ -42,8 +44,11 @@ def poll_round_s(plan: LinePlan) -> tuple[float, float]:
     return one_round, full_refresh
 
 
-def check(path: Path) -> int:
-    """Validate ``path``; print a summary. ConfigError (exit 2) lists every problem."""
+def check(path: Path, *, machine: Machine | None = None) -> int:
+    """Validate ``path``; print a summary. ConfigError (exit 2) lists every problem.
+
+    Warnings (exit 0): a bus at ``/dev/ttyUSBn`` whose adapter has a stable name.
+    """
     config = config_module.load(path)
     print(f"{path}: valid")
     for plan in config.lines:
@@ -61,6 +66,8 @@ def check(path: Path) -> int:
     model = config.model
     adapters = [name for name in ("http", "mqtt", "metrics") if getattr(model, name) is not None]
     print(f"  adapters: {', '.join(adapters) or 'none'}; on_shutdown: {model.on_shutdown}")
+    for unstable in unstable_ports(config.lines, machine):
+        print(f"  warning: {unstable.message()}")
     return 0
 
 
