@@ -186,6 +186,14 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--link", help="also make this path a symbolic link to the pty")
     sim.add_argument("--faults", default="", help="e.g. drop=0.05,corrupt=0.01,late=0.01,echo")
     sim.add_argument("--response-delay-ms", type=float, help="every drive's 8-35 (default 10)")
+    sim.add_argument(
+        "--adapter-latency-ms", type=float, metavar="MS",
+        help="hold replies like a USB adapter's latency timer (FTDI's default is 16)",
+    )  # fmt: skip
+    sim.add_argument(
+        "--duplicate-addresses", action="store_true",
+        help="serve a repeated address (--addresses 1,1) as two drives that both answer",
+    )  # fmt: skip
     _encoding_options(sim)
 
     ports = commands.add_parser(

@@ -14,7 +14,7 @@ import termios
 
 # errno → the fix, for a local device path
 _DEVICE_HINTS = {
-    errno.ENOENT: "check the path; `fcmaster ports` lists this machine's serial adapters",
+    errno.ENOENT: "check the device path; `fcmaster ports` lists the serial adapters here",
     errno.EACCES: "this user may not open it: add the user to the dialout group, log in again",
     errno.EPERM: "this user may not open it: add the user to the dialout group, log in again",
     errno.EBUSY: "another program has it open",

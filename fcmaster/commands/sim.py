@@ -52,6 +52,8 @@ async def run(args: argparse.Namespace) -> int:
         address_encoding=args.address_encoding,
         response_encoding=args.response_encoding,
         fault_encoding=args.fault_encoding,
+        adapter_latency_ms=args.adapter_latency_ms,
+        duplicate_addresses=args.duplicate_addresses,
     )
     drive = DriveSettings(response_delay_s=None if delay_ms is None else delay_ms / 1000.0)
     return await serve([SimBus(line, [(address, drive) for address in args.addresses], args.link)])
