@@ -115,6 +115,11 @@ class Machine:
         name = os.path.basename(os.path.realpath(port))
         return name if (self.sys / "class" / "tty" / name / "device").exists() else None
 
+    def is_usb(self, name: str) -> bool:
+        """Whether tty ``name`` hangs on a USB device (an adapter, not a board's UART)."""
+        device = os.path.realpath(self.sys / "class" / "tty" / name / "device")
+        return any(part.startswith("usb") for part in Path(device).parts)
+
     def driver(self, name: str) -> str | None:
         """The kernel driver of tty ``name`` (ftdi_sio, …), if sysfs names one."""
         # Since Linux 6.2 a UART's tty hangs on a "port" device of the serial-base bus, whose
@@ -191,13 +196,16 @@ def tune(
 ) -> Adapter | None:
     """Ask the adapter behind the open ``port`` (descriptor ``fd``) for low latency.
 
-    Returns what it is afterwards, or None when ``port`` is no adapter sysfs knows (a pty, a
-    UART without a device entry). Never raises for a driver that refuses: it is logged.
+    Returns what it is afterwards, or None when ``port`` is no tty sysfs knows (a pty). A
+    port that is not on USB (a board's UART) is described but left as it is. Never raises
+    for a driver that refuses: it is logged.
     """
     machine = machine or Machine()
     name = machine.tty_name(port)
     if name is None:
         return None
+    if not machine.is_usb(name):
+        return machine.adapter(name)  # a board's UART: no latency timer to ask about
     flags = flags or IoctlSerialFlags()
     low = _ask_low_latency(port, fd, flags)
     latency = machine.latency_ms(name)

@@ -13,8 +13,9 @@ when written (or when its own previous bytes have left the UART) and take ``char
 Drives hear the bytes through one framer of the protocol (every drive hears the same
 bytes, so one receiver stands for all of them); each checked request frame is handed to
 every drive at the time its last character ends. A drive answers only when addressed, so at
-most one reply burst is scheduled: it starts ``response_delay_s`` after the request's end.
-The line never decodes a frame; addressing is the drives' business.
+most one reply burst is scheduled (two drives at one address: two, which collide); it starts
+``response_delay_s`` after the request's end. The line never decodes a frame; addressing is
+the drives' business.
 
 Bursts that overlap in time collide, as on a half-duplex pair: the characters that overlap
 are replaced by garbage in both, so the master's framer rejects the reply and the drives'

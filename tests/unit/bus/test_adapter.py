@@ -103,6 +103,16 @@ def test_a_port_sysfs_does_not_know_is_left_alone(tmp_path: Path) -> None:
     assert flags.calls == 0
 
 
+def test_a_boards_own_uart_is_described_but_not_touched(tmp_path: Path) -> None:
+    machine = FakeMachine(tmp_path)
+    device = machine.add("ttyAMA0", "uart-pl011", usb=False)
+    flags = RefusingFlags()
+    adapter = tune(device, FD, machine=machine, flags=flags)
+    assert adapter is not None
+    assert (adapter.driver, adapter.latency_ms) == ("uart-pl011", None)
+    assert flags.calls == 0
+
+
 def test_adapters_are_listed_with_their_stable_names_and_onboard_uarts_left_out(
     tmp_path: Path,
 ) -> None:
