@@ -205,7 +205,10 @@ async def run(
 def _refusal(url: str, target: str, status: int, has_token: bool) -> str:
     """What an HTTP refusal of the stream means: a token problem, or not fcmaster there."""
     if status in (401, 403) and has_token:
-        return f"{url} does not accept this token (HTTP {status}): pass a viewer token it knows"
+        return (
+            f"{url} does not accept this token (HTTP {status}): "
+            "pass one it knows with --token or FCM_TOKEN"
+        )
     if status in (401, 403):
         return f"{url} wants a viewer token (HTTP {status}): pass one with --token or FCM_TOKEN"
     return (
