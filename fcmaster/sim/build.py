@@ -112,6 +112,7 @@ def build_line(
         drive_faults={a: s.faults for a, s in drives if s.faults is not None},
         rng=rng or random.Random(line.faults.seed or 0),
         adapter=adapter,
+        parity=line.parity,
     )
 
 

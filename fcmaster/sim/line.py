@@ -30,9 +30,9 @@ What reaches the master (replies, noise, and its own echo when the fault plan as
 is delivered whole at the end time of its last character, never sooner — or, with a
 :class:`~fcmaster.sim.adapter.LatencyAdapter`, when that adapter's latency timer lets it go.
 
-A master that talks at another baud rate than the line's (:meth:`SimLine.hear_master_at`,
-which the pty server calls with the speed a client set) is heard as garbage: every
-character is misframed, so no drive answers it, as on a real line.
+A master that talks at another baud rate or parity than the line's
+(:meth:`SimLine.hear_master_at`, which the pty server calls with the speed a client set) is
+heard as garbage: every character is misframed, so no drive answers it, as on a real line.
 
 A pause longer than ``gap_s`` between the master's bytes makes the drives give up an
 unfinished request (the framer's ``reset``), as a drive does after 8-37 Maximum
@@ -122,7 +122,7 @@ class LineCounters:
     noise_bursts: int = 0
     collisions: int = 0
     skipped_bytes: int = 0  # request bytes the drives' framer threw away
-    misframed_bytes: int = 0  # master bytes sent at another baud rate than the line's
+    misframed_bytes: int = 0  # master bytes sent at another baud rate or parity than the line's
 
 
 @dataclass(slots=True, eq=False)
@@ -152,6 +152,7 @@ class SimLine:
         gap_s: float | None = None,
         history: int = DEFAULT_HISTORY,
         adapter: LatencyAdapter | None = None,
+        parity: str | None = None,
     ) -> None:
         """Build the line.
 
@@ -168,6 +169,7 @@ class SimLine:
             gap_s: a pause between the master's bytes that ends an unfinished request.
             history: how many transactions :attr:`transactions` keeps.
             adapter: a USB adapter that holds what reaches the master (None: none).
+            parity: the line's parity (N, E or O), to judge a master's; None: not judged.
         """
         if baudrate <= 0 or char_bits <= 0:
             raise UsageError("baud rate and bits per character must be positive")
@@ -200,16 +202,26 @@ class SimLine:
         # stream offset and arrival time of recent writes; enough for a frame sent bytewise
         self._chunks: deque[tuple[int, float]] = deque(maxlen=256)
         self.adapter = adapter
+        self.parity = parity
         self.master_baudrate: int | None = None  # None: the line's own
+        self.master_parity: str | None = None
 
-    def hear_master_at(self, baudrate: int | None) -> None:
-        """The master now transmits at ``baudrate`` (None: at the line's own)."""
+    def hear_master_at(self, baudrate: int | None, parity: str | None = None) -> None:
+        """The master now transmits at ``baudrate`` and ``parity`` (None: the line's own).
+
+        A pty server can tell the baud rate but not the parity (Linux drops PARENB from a
+        pty's settings); an in-process master can tell both.
+        """
         self.master_baudrate = baudrate
+        self.master_parity = parity
 
     @property
     def master_misframed(self) -> bool:
-        """Whether the drives cannot read the master's characters (another baud rate)."""
-        return self.master_baudrate is not None and self.master_baudrate != self.baudrate
+        """Whether the drives cannot read the master's characters (another baud or parity)."""
+        baud, parity = self.master_baudrate, self.master_parity
+        return (baud is not None and baud != self.baudrate) or (
+            parity is not None and self.parity is not None and parity != self.parity
+        )
 
     @property
     def drives(self) -> tuple[SimDrive, ...]:

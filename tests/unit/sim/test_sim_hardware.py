@@ -101,6 +101,20 @@ def test_a_master_at_another_baud_rate_is_not_understood() -> None:
     assert line.next_delivery() is not None
 
 
+@pytest.mark.parametrize("parity", ["N", "O"])
+def test_a_master_with_another_parity_is_not_understood(parity: str) -> None:
+    clock = FakeClock()
+    line = build_line(LineSettings(baudrate=19200, parity="E"), [(1, DriveSettings())], clock=clock)
+    line.hear_master_at(19200, parity)
+    line.write(encode_telegram(read(1, 1613)))
+    assert line.next_delivery() is None
+    assert line.counters.misframed_bytes == 16
+    line.hear_master_at(19200, "E")
+    clock.time += 1.0
+    line.write(encode_telegram(read(1, 1613)))
+    assert line.counters.requests == 1
+
+
 def test_two_drives_on_one_address_garble_each_others_reply() -> None:
     clock = FakeClock()
     line = build_line(
