@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import sys
 from collections.abc import Callable, Coroutine
 from pathlib import Path
@@ -32,10 +33,26 @@ def _addresses(text: str) -> list[int]:
     try:
         for part in text.split(","):
             first, _, last = part.strip().partition("-")
-            out.extend(range(int(first), int(last or first) + 1))
+            low, high = int(first), int(last or first)
+            if high < low:
+                raise argparse.ArgumentTypeError(
+                    f"{part.strip()!r} runs backwards; write {high}-{low}"
+                )
+            out.extend(range(low, high + 1))
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not like 1-126 or 1,4,7") from None
     return out
+
+
+def _seconds(text: str) -> float:
+    """A positive, finite number of seconds (``--timeout``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number of seconds")
+    return value
 
 
 def _line_options(parser: argparse.ArgumentParser) -> None:
@@ -46,7 +63,7 @@ def _line_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--parity", choices=("N", "E", "O"))
     parser.add_argument("--stopbits", type=int, choices=(1, 2))
     parser.add_argument("--address-format", type=int, choices=(31, 126), default=126)
-    parser.add_argument("--timeout", type=float, help="reply deadline in seconds")
+    parser.add_argument("--timeout", type=_seconds, help="reply deadline in seconds")
     parser.add_argument(
         "--terminator", choices=("none", "cr", "crlf"), default="cr",
         help="mitsubishi: as the drives' Pr.124 (default cr)",
@@ -112,7 +129,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     scan = commands.add_parser("scan", help="find which addresses answer")
     _line_options(scan)
-    scan.add_argument("--addresses", type=_addresses, help="default: every address")
+    scan.add_argument(
+        "--addresses", type=_addresses, help="default: every address the protocol can reach"
+    )
     scan.add_argument("--json", action="store_true", help="print JSON")
 
     status = commands.add_parser("status", help="one drive's decoded status now")
@@ -145,7 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     reference = control.add_mutually_exclusive_group()
     reference.add_argument("--frequency", type=float, help="Hz")
-    reference.add_argument("--reference", type=float, help="% of the nominal frequency")
+    reference.add_argument("--reference", type=float, help="%% of the nominal frequency")
     control.add_argument("--nominal-frequency", type=float, default=50.0, help="Hz at 100 %%")
     control.add_argument("--max-frequency", type=float, help="refuse more (default: nominal)")
 
@@ -173,7 +192,21 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--link", help="also make this path a symbolic link to the pty")
     sim.add_argument("--faults", default="", help="e.g. drop=0.05,corrupt=0.01,late=0.01,echo")
     sim.add_argument("--response-delay-ms", type=float, help="every drive's 8-35 (default 10)")
+    sim.add_argument(
+        "--adapter-latency-ms", type=float, metavar="MS",
+        help="hold replies like a USB adapter's latency timer (FTDI's default is 16)",
+    )  # fmt: skip
+    sim.add_argument(
+        "--duplicate-addresses", action="store_true",
+        help="serve a repeated address (--addresses 1,1) as two drives that both answer",
+    )  # fmt: skip
     _encoding_options(sim)
+
+    ports = commands.add_parser(
+        "ports", help="this machine's serial adapters: stable names, driver, latency timer"
+    )
+    ports.add_argument("--config", type=Path, help="also say which bus uses each adapter")
+    ports.add_argument("--json", action="store_true", help="print JSON")
 
     monitor = commands.add_parser("monitor", help="a running daemon's fleet as a live table")
     monitor.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
@@ -227,11 +260,9 @@ def _options(args: argparse.Namespace) -> Any:
 def _cmd_run(args: argparse.Namespace) -> int:
     from fcmaster.commands import daemon
 
-    return _run_async(
-        daemon.run(
-            args.config or DEMO_CONFIG, demo=args.config is None, http_listen=args.http_listen
-        )
-    )
+    config = args.config or DEMO_CONFIG
+    demo = config.resolve() == DEMO_CONFIG  # also when named as config/demo.yaml
+    return _run_async(daemon.run(config, demo=demo, http_listen=args.http_listen))
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
@@ -249,9 +280,7 @@ def _cmd_modbus_map(args: argparse.Namespace) -> int:
 def _cmd_scan(args: argparse.Namespace) -> int:
     from fcmaster.commands import commission
 
-    every = range(0, 32) if args.protocol == "mitsubishi" else range(1, 127)  # stations 0-31
-    addresses = args.addresses or list(every)
-    return _run_async(commission.scan(_options(args), addresses, as_json=args.json))
+    return _run_async(commission.scan(_options(args), args.addresses, as_json=args.json))
 
 
 def _cmd_status(args: argparse.Namespace) -> int:
@@ -315,6 +344,12 @@ def _cmd_decode(args: argparse.Namespace) -> int:
     )
 
 
+def _cmd_ports(args: argparse.Namespace) -> int:
+    from fcmaster.commands import ports
+
+    return ports.run(args.config, as_json=args.json)
+
+
 def _cmd_monitor(args: argparse.Namespace) -> int:
     from fcmaster.commands import monitor
 
@@ -333,13 +368,14 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "decode": _cmd_decode,
     "sim": _cmd_sim,
     "monitor": _cmd_monitor,
+    "ports": _cmd_ports,
 }
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     args = build_parser().parse_args(argv)
-    if args.command not in ("run", "decode", "check", "modbus-map"):
+    if args.command not in ("run", "decode", "check", "modbus-map", "ports"):
         from fcmaster import logsetup
 
         logsetup.configure("warning")  # commissioning tools: only what needs attention

@@ -97,6 +97,7 @@ class Service:
         self.fleet = FleetState(config.lines, emit=self.hub.publish, clock=self.clock)
         self._transport_factory = transport_factory or self._default_transport
         self.masters: dict[str, BusMaster] = {}
+        self._serial_ports: dict[str, SerialTransport] = {}  # by bus, for their adapters
         self._stopping = asyncio.Event()
 
     def _default_transport(self, plan: LinePlan) -> Transport:
@@ -114,6 +115,7 @@ class Service:
                 databits=plan.databits,
                 rs485=plan.rs485,
             )
+            self._serial_ports[plan.name] = transport
         return EchoCancellingTransport(transport) if plan.echo else transport
 
     def drive_plan(self, name: str) -> DrivePlan | None:
@@ -139,6 +141,7 @@ class Service:
                     up=master is not None and master.is_up,
                     drives=tuple(d.name for d in plan.drives),
                     stats=master.stats.to_json(now) if master is not None else {},
+                    adapter=_adapter_json(self._serial_ports.get(plan.name)),
                 )
             )
         return infos
@@ -240,3 +243,8 @@ class Service:
                 self.hub.publish(
                     LineChanged(bus=name, up=master.is_up, stats=master.stats.to_json(now))
                 )
+
+
+def _adapter_json(port: SerialTransport | None) -> dict[str, Any] | None:
+    adapter = port.adapter if port is not None else None
+    return adapter.to_json() if adapter is not None else None

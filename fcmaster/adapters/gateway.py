@@ -22,6 +22,7 @@ class LineInfo:
     up: bool
     drives: tuple[str, ...]
     stats: dict[str, Any]
+    adapter: dict[str, Any] | None = None  # the USB adapter behind a local port, once open
 
     def to_json(self) -> dict[str, Any]:
         """The public JSON shape of a line."""
@@ -33,6 +34,7 @@ class LineInfo:
             "up": self.up,
             "drives": list(self.drives),
             "stats": self.stats,
+            "adapter": self.adapter,
         }
 
 

@@ -216,6 +216,7 @@ def _line(x: Exposition, line: LineInfo) -> None:
     info = labels({"port": line.port, "protocol": line.protocol, "baudrate": line.baudrate}, base)
     x.add("fcmaster_bus_info", "gauge", "The line's configuration (always 1).", 1, info)
     x.add("fcmaster_bus_up", "gauge", "Whether the line's port is open.", int(line.up), base)
+    _adapter(x, line.adapter, base)
     stats = line.stats
     if not stats:
         return
@@ -248,6 +249,22 @@ def _line(x: Exposition, line: LineInfo) -> None:
                 counters["last_latency_s"],
                 drive_labels,
             )
+
+
+def _adapter(x: Exposition, adapter: Mapping[str, Any] | None, base: str) -> None:
+    if adapter is None:
+        return
+    names = {k: adapter[k] or "" for k in ("device", "driver", "by_id")}
+    x.add("fcmaster_bus_adapter_info", "gauge", "The line's serial adapter (always 1).", 1,
+          labels(names, base))  # fmt: skip
+    if adapter["latency_ms"] is not None:
+        x.add(
+            "fcmaster_bus_adapter_latency_seconds",
+            "gauge",
+            "The adapter's latency timer: how long it may hold a reply back.",
+            adapter["latency_ms"] / 1000.0,
+            base,
+        )
 
 
 def _hub(x: Exposition, hub: Hub) -> None:

@@ -155,6 +155,16 @@ class ParameterOut(ResultOut):
     index: int
 
 
+class AdapterOut(BaseModel):
+    """The serial adapter behind a local port, as the machine names it."""
+
+    device: str = Field(description="the tty, e.g. /dev/ttyUSB0")
+    driver: str | None = Field(description="the kernel driver: ftdi_sio, ch341-uart, cp210x, …")
+    by_id: str | None = Field(description="its /dev/serial/by-id name")
+    by_path: str | None = Field(description="its /dev/serial/by-path name")
+    latency_ms: int | None = Field(description="its latency timer (null: it has none)")
+
+
 class LineOut(BaseModel):
     """One line: its port, whether it is up, its drives and its statistics."""
 
@@ -165,6 +175,9 @@ class LineOut(BaseModel):
     up: bool
     drives: list[str]
     stats: dict[str, object] = Field(description="counters and histograms (le '+Inf' as text)")
+    adapter: AdapterOut | None = Field(
+        None, description="the USB serial adapter of a local port, once opened (else null)"
+    )
 
 
 class PrincipalOut(BaseModel):

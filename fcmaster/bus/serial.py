@@ -30,6 +30,8 @@ import serial.rs485
 import serial_asyncio_fast
 import structlog
 
+from fcmaster.bus.adapter import Adapter, tune
+from fcmaster.bus.open_errors import open_error
 from fcmaster.errors import PortError, ReplyTimeout
 
 log = structlog.get_logger("fcmaster.bus")
@@ -177,6 +179,7 @@ class SerialTransport:
             "bytesize": databits,
         }
         self._rs485 = rs485
+        self.adapter: Adapter | None = None  # the USB adapter behind a local port, once open
         self._receiver = _Receiver()
         self._transport: _Port | None = None
 
@@ -203,10 +206,7 @@ class SerialTransport:
                         loop, lambda: receiver, instance
                     )
         except (serial.SerialException, OSError, ValueError, termios.error) as exc:
-            raise PortError(
-                f"cannot open {self.port}: {exc} (check the device path, and that this user "
-                "may use it, e.g. is in the dialout group)"
-            ) from exc
+            raise PortError(open_error(self.port, exc)) from exc
         self._transport = transport
 
     def _open_serial(self) -> serial.Serial:
@@ -222,6 +222,8 @@ class SerialTransport:
                 rts_level_for_tx=True, rts_level_for_rx=False
             )
         instance.open()
+        if os.name == "posix" and type(instance) is serial.Serial:
+            self.adapter = tune(self.port, instance.fileno())  # once per open, not per read
         return instance
 
     async def close(self) -> None:

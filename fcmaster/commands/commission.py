@@ -8,6 +8,7 @@ limits are checked and a running drive is adopted, never jolted.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import sys
 from dataclasses import dataclass, replace
@@ -30,6 +31,10 @@ FACTORY: dict[str, tuple[int, str, int]] = {
     "mitsubishi": (19200, "E", 2),  # Pr.118 / Pr.119 / Pr.120 defaults
     "enc": (9600, "N", 1),  # F2.14 = 03
 }
+
+
+# The actions a --frequency or --reference means something to.
+_TAKES_REFERENCE = (Action.START, Action.SET_REFERENCE, Action.FORWARD, Action.REVERSE)
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -102,32 +107,51 @@ def _check_address(codec: DriveCodec, address: int) -> None:
         raise UsageError(f"address {address} is outside {span} for this protocol")
 
 
-async def scan(options: LineOptions, addresses: list[int], *, as_json: bool) -> int:
-    """Poll each address once; list those that answer."""
+async def scan(options: LineOptions, addresses: list[int] | None, *, as_json: bool) -> int:
+    """Poll each address once (default: every one the codec can reach); list those that answer.
+
+    Interrupted (Ctrl-C), it still lists the drives found so far, then re-raises.
+    """
     found: list[dict[str, Any]] = []
+    show_progress = sys.stderr.isatty()
     async with _Session(options.plan()) as session:
+        addresses = list(session.codec.addresses) if addresses is None else addresses
         for address in addresses:
             _check_address(session.codec, address)
-        show_progress = sys.stderr.isatty()
-        for n, address in enumerate(addresses, 1):
-            reply = await session.poll(address)
-            if reply is None:  # one retry: a single lost reply must not hide a drive
+        done = 0
+        try:
+            for done, address in enumerate(addresses, 1):
                 reply = await session.poll(address)
-            if reply is not None:
-                found.append(_summary(address, reply))
+                if reply is None:  # one retry: a single lost reply must not hide a drive
+                    reply = await session.poll(address)
+                if reply is not None:
+                    found.append(_summary(address, reply))
+                if show_progress:
+                    _progress(done, len(addresses), address, len(found))
+        except asyncio.CancelledError:  # Ctrl-C: what was found is still worth knowing
             if show_progress:
-                _progress(n, len(addresses), address, len(found))
+                print(file=sys.stderr)
+            print(f"interrupted at {done} of {len(addresses)} addresses", file=sys.stderr)
+            _print_found(found, options, len(addresses), as_json=as_json)
+            raise
         if show_progress:
             print(file=sys.stderr)
+    _print_found(found, options, len(addresses), as_json=as_json)
+    return 0 if found else 1
+
+
+def _print_found(
+    found: list[dict[str, Any]], options: LineOptions, tried: int, *, as_json: bool
+) -> None:
     if as_json:
-        print(json.dumps(found, indent=2))
+        print(json.dumps(found, indent=2), flush=True)
     elif found:
         for entry in found:
             flags = ", ".join(k for k in ("running", "fault", "warning") if entry[k]) or "stopped"
             print(f"{entry['address']:>4}  status 0x{entry['status_word']:04X}  {flags}")
     else:
-        print(f"no drive answered on {options.port} ({len(addresses)} addresses tried)")
-    return 0 if found else 1
+        print(f"no drive answered on {options.port} ({tried} addresses tried)")
+    sys.stdout.flush()
 
 
 def _progress(done: int, total: int, address: int, found: int) -> None:
@@ -266,6 +290,10 @@ async def control(
         raise UsageError(f"unknown action {action!r}") from None
     if not verb.is_control:
         raise UsageError(f"{action} is not a control action; use read or write")
+    given = "--frequency" if frequency_hz is not None else "--reference"
+    if (frequency_hz is not None or reference_pct is not None) and verb not in _TAKES_REFERENCE:
+        takes = ", ".join(a.value.replace("_", "-") for a in _TAKES_REFERENCE)
+        raise UsageError(f"{action} takes no {given} (only {takes} do)")
     drive = DrivePlan(
         name=f"drive-{address}",
         address=address,
@@ -279,6 +307,12 @@ async def control(
         pct = frequency_hz / nominal_frequency_hz * 100.0
     if verb is Action.SET_REFERENCE and pct is None:
         raise UsageError("set_reference needs --frequency or --reference")
+    if pct is not None and max_frequency_hz is None and abs(pct) > 100.0 + 1e-9:
+        # The limit is the nominal frequency only because none was given: say how to give one.
+        raise UsageError(
+            f"{pct * nominal_frequency_hz / 100.0:g} Hz is beyond the nominal "
+            f"{nominal_frequency_hz:g} Hz; pass --max-frequency if the drive may run faster"
+        )
     command = Command(action=verb, reference_pct=pct, actor="cli")
     async with _Session(plan) as session:
         _check_address(session.codec, address)
@@ -295,7 +329,8 @@ async def control(
     try:
         result.raise_for_outcome()
     except CommandError as exc:
-        raise type(exc)(f"{action}: {exc}") from None
+        exc.args = (f"{action}: {exc}",)  # the same error, its other fields kept
+        raise
     return 1  # pragma: no cover - raise_for_outcome raises for every other outcome
 
 

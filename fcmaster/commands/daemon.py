@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import dataclasses
+import errno
+import socket
 from pathlib import Path
 
 import structlog
 
 from fcmaster import config as config_module
 from fcmaster import logsetup
+from fcmaster.bus.adapter import Machine
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import LinePlan
+from fcmaster.commands.ports import unstable_ports
 from fcmaster.errors import ConfigError, UsageError
 
 log = structlog.get_logger("fcmaster.cli")
@@ -40,8 +44,11 @@ def poll_round_s(plan: LinePlan) -> tuple[float, float]:
     return one_round, full_refresh
 
 
-def check(path: Path) -> int:
-    """Validate ``path``; print a summary. ConfigError (exit 2) lists every problem."""
+def check(path: Path, *, machine: Machine | None = None) -> int:
+    """Validate ``path``; print a summary. ConfigError (exit 2) lists every problem.
+
+    Warnings (exit 0): a bus at ``/dev/ttyUSBn`` whose adapter has a stable name.
+    """
     config = config_module.load(path)
     print(f"{path}: valid")
     for plan in config.lines:
@@ -61,6 +68,8 @@ def check(path: Path) -> int:
         name for name in ("http", "mqtt", "modbus", "metrics") if getattr(model, name) is not None
     ]
     print(f"  adapters: {', '.join(adapters) or 'none'}; on_shutdown: {model.on_shutdown}")
+    for unstable in unstable_ports(config.lines, machine):
+        print(f"  warning: {unstable.message()}")
     return 0
 
 
@@ -81,6 +90,29 @@ def with_http_listen(config: config_module.Config, listen: str) -> config_module
     return dataclasses.replace(config, model=model)
 
 
+def check_listen(listen: str, *, overridden: bool) -> None:
+    """UsageError now, before any line is opened, if the HTTP address cannot be had.
+
+    A trial bind with the options the HTTP adapter's own bind uses; it is closed at once.
+    The adapter still reports a port taken in between, as the config's problem.
+    """
+    from fcmaster.adapters.http import parse_listen
+
+    host, port = parse_listen(listen)
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    try:
+        socket.create_server((host, port), family=family).close()
+    except OSError as exc:
+        where = "--http-listen" if overridden else "http.listen"
+        taken = exc.errno == errno.EADDRINUSE
+        reason = "it is taken (another fcmaster?)" if taken else (exc.strerror or str(exc))
+        other = port + 1 if 0 < port < 65535 else 8081
+        raise UsageError(
+            f"cannot serve HTTP at {host}:{port} ({where}): {reason}; "
+            f"pass --http-listen {host}:{other} to use another port"
+        ) from exc
+
+
 async def run(path: Path, *, demo: bool, http_listen: str | None = None) -> int:
     """Run the daemon until SIGTERM/SIGINT (``http_listen`` overrides ``http.listen``)."""
     from fcmaster.service import Service
@@ -88,6 +120,8 @@ async def run(path: Path, *, demo: bool, http_listen: str | None = None) -> int:
     config = config_module.load(path)
     if http_listen is not None:
         config = with_http_listen(config, http_listen)
+    if config.model.http is not None:
+        check_listen(config.model.http.listen, overridden=http_listen is not None)
     logsetup.configure(config.model.logging.level, config.model.logging.format)
     log.info("config.loaded", path=str(path), demo=demo, http_listen=http_listen)
     await Service(config, demo=demo).run()

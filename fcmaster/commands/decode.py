@@ -39,15 +39,16 @@ def read_frame(text: str) -> bytes:
 
 
 def _table(decoded: dict[str, Any]) -> str:
+    width = max([16, *(len(key) + 2 for key in decoded)])  # a long key keeps a gap too
     lines = []
     for key, value in decoded.items():
         if isinstance(value, dict) and key in ("control", "status"):
             active = [name for name, on in value.items() if on]
-            lines.append(f"{key:<16}{', '.join(active) or '(none)'}")
+            lines.append(f"{key:<{width}}{', '.join(active) or '(none)'}")
         elif isinstance(value, dict):
-            lines.append(f"{key:<16}{', '.join(f'{k}={v}' for k, v in value.items())}")
+            lines.append(f"{key:<{width}}{', '.join(f'{k}={v}' for k, v in value.items())}")
         elif value is not None:
-            lines.append(f"{key:<16}{_hex_if_word(key, value)}")
+            lines.append(f"{key:<{width}}{_hex_if_word(key, value)}")
     return "\n".join(lines)
 
 

@@ -187,10 +187,8 @@ async def run(
                             print(render_table(fleet, width=_width(is_tty)), file=out)
                             return 0
             except InvalidStatus as exc:
-                raise UsageError(
-                    f"{url} refused the stream ({exc.response.status_code}): pass a viewer "
-                    "token with --token or FCM_TOKEN"
-                ) from exc
+                status = exc.response.status_code
+                raise UsageError(_refusal(url, target, status, bool(token))) from exc
             except (OSError, WebSocketException, TimeoutError) as exc:
                 if once:
                     raise FcmasterError(f"cannot reach fcmaster at {url}: {exc}") from exc
@@ -202,6 +200,21 @@ async def run(
         if painter is not None:
             painter.cancel()
             await asyncio.gather(painter, return_exceptions=True)
+
+
+def _refusal(url: str, target: str, status: int, has_token: bool) -> str:
+    """What an HTTP refusal of the stream means: a token problem, or not fcmaster there."""
+    if status in (401, 403) and has_token:
+        return (
+            f"{url} does not accept this token (HTTP {status}): "
+            "pass one it knows with --token or FCM_TOKEN"
+        )
+    if status in (401, 403):
+        return f"{url} wants a viewer token (HTTP {status}): pass one with --token or FCM_TOKEN"
+    return (
+        f"{target} is not an fcmaster stream (HTTP {status}): check that --url is the "
+        "daemon's HTTP address (its http.listen)"
+    )
 
 
 def _width(is_tty: bool) -> int:

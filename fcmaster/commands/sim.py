@@ -52,6 +52,8 @@ async def run(args: argparse.Namespace) -> int:
         address_encoding=args.address_encoding,
         response_encoding=args.response_encoding,
         fault_encoding=args.fault_encoding,
+        adapter_latency_ms=args.adapter_latency_ms,
+        duplicate_addresses=args.duplicate_addresses,
     )
     drive = DriveSettings(response_delay_s=None if delay_ms is None else delay_ms / 1000.0)
     return await serve([SimBus(line, [(address, drive) for address in args.addresses], args.link)])
@@ -64,7 +66,7 @@ def config_buses(path: Path, *, only: Sequence[str] | None = None) -> list[SimBu
     names the buses to serve (default: all of them), so one line can be served by a
     process of its own and taken away (an unplugged adapter) while the others stay.
     """
-    config = load(path)
+    config = load(path, buses_only=True)  # the daemon's secrets are no business of ours
     if only:
         unknown = sorted(set(only) - {plan.name for plan in config.lines})
         if unknown:

@@ -17,6 +17,7 @@ from fcmaster.bus.plan import LinePlan
 from fcmaster.clock import Clock
 from fcmaster.errors import UsageError
 from fcmaster.protocol.danfoss_fc.framer import FcFramer
+from fcmaster.sim.adapter import LatencyAdapter
 from fcmaster.sim.danfoss_fc.drive import FcSimDrive
 from fcmaster.sim.enc.drive import EncRequestFramer, EncSimDrive
 from fcmaster.sim.line import RequestFramer, SimDrive, SimLine
@@ -96,9 +97,11 @@ def build_line(
     if bad:
         raise UsageError(f"{line.protocol} addresses are {_span(protocol.addresses)}, not {bad}")
     repeated = sorted({a for a in addresses if addresses.count(a) > 1})
-    if repeated:
+    if repeated and not line.duplicate_addresses:
         raise UsageError(f"addresses {repeated} appear more than once on line {line.name}")
     now = clock.now()
+    latency_ms = line.adapter_latency_ms
+    adapter = None if latency_ms is None else LatencyAdapter(latency_ms / 1000.0, epoch=now)
     return SimLine(
         drives=[protocol.new_drive(address, settings, line, now) for address, settings in drives],
         framer_factory=partial(protocol.framer_for, [settings for _, settings in drives]),
@@ -108,6 +111,8 @@ def build_line(
         faults=line.faults,
         drive_faults={a: s.faults for a, s in drives if s.faults is not None},
         rng=rng or random.Random(line.faults.seed or 0),
+        adapter=adapter,
+        parity=line.parity,
     )
 
 

@@ -13,8 +13,9 @@ when written (or when its own previous bytes have left the UART) and take ``char
 Drives hear the bytes through one framer of the protocol (every drive hears the same
 bytes, so one receiver stands for all of them); each checked request frame is handed to
 every drive at the time its last character ends. A drive answers only when addressed, so at
-most one reply burst is scheduled: it starts ``response_delay_s`` after the request's end.
-The line never decodes a frame; addressing is the drives' business.
+most one reply burst is scheduled (two drives at one address: two, which collide); it starts
+``response_delay_s`` after the request's end. The line never decodes a frame; addressing is
+the drives' business.
 
 Bursts that overlap in time collide, as on a half-duplex pair: the characters that overlap
 are replaced by garbage in both, so the master's framer rejects the reply and the drives'
@@ -26,7 +27,12 @@ byte by byte, so a reply to the first telegram of a burst garbles the telegrams 
 before they are heard.
 
 What reaches the master (replies, noise, and its own echo when the fault plan asks for it)
-is delivered whole at the end time of its last character, never sooner.
+is delivered whole at the end time of its last character, never sooner — or, with a
+:class:`~fcmaster.sim.adapter.LatencyAdapter`, when that adapter's latency timer lets it go.
+
+A master that talks at another baud rate or parity than the line's
+(:meth:`SimLine.hear_master_at`, which the pty server calls with the speed a client set) is
+heard as garbage: every character is misframed, so no drive answers it, as on a real line.
 
 A pause longer than ``gap_s`` between the master's bytes makes the drives give up an
 unfinished request (the framer's ``reset``), as a drive does after 8-37 Maximum
@@ -35,6 +41,7 @@ Inter-Char Delay (25 ms by default on FC drives).
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import math
 import random
@@ -46,6 +53,7 @@ from typing import Final, Protocol
 from fcmaster.clock import Clock
 from fcmaster.errors import UsageError
 from fcmaster.protocol.framing import Frame, Skipped
+from fcmaster.sim.adapter import LatencyAdapter
 from fcmaster.sim.faults import FaultPlan
 
 DEFAULT_GAP_S: Final = 0.025
@@ -114,6 +122,7 @@ class LineCounters:
     noise_bursts: int = 0
     collisions: int = 0
     skipped_bytes: int = 0  # request bytes the drives' framer threw away
+    misframed_bytes: int = 0  # master bytes sent at another baud rate or parity than the line's
 
 
 @dataclass(slots=True, eq=False)
@@ -142,6 +151,8 @@ class SimLine:
         rng: random.Random | None = None,
         gap_s: float | None = None,
         history: int = DEFAULT_HISTORY,
+        adapter: LatencyAdapter | None = None,
+        parity: str | None = None,
     ) -> None:
         """Build the line.
 
@@ -157,6 +168,8 @@ class SimLine:
                 ``faults.seed`` (or 0).
             gap_s: a pause between the master's bytes that ends an unfinished request.
             history: how many transactions :attr:`transactions` keeps.
+            adapter: a USB adapter that holds what reaches the master (None: none).
+            parity: the line's parity (N, E or O), to judge a master's; None: not judged.
         """
         if baudrate <= 0 or char_bits <= 0:
             raise UsageError("baud rate and bits per character must be positive")
@@ -188,6 +201,27 @@ class SimLine:
         self._consumed = 0  # of those, bytes the framer has handed out (frames and skips)
         # stream offset and arrival time of recent writes; enough for a frame sent bytewise
         self._chunks: deque[tuple[int, float]] = deque(maxlen=256)
+        self.adapter = adapter
+        self.parity = parity
+        self.master_baudrate: int | None = None  # None: the line's own
+        self.master_parity: str | None = None
+
+    def hear_master_at(self, baudrate: int | None, parity: str | None = None) -> None:
+        """The master now transmits at ``baudrate`` and ``parity`` (None: the line's own).
+
+        A pty server can tell the baud rate but not the parity (Linux drops PARENB from a
+        pty's settings); an in-process master can tell both.
+        """
+        self.master_baudrate = baudrate
+        self.master_parity = parity
+
+    @property
+    def master_misframed(self) -> bool:
+        """Whether the drives cannot read the master's characters (another baud or parity)."""
+        baud, parity = self.master_baudrate, self.master_parity
+        return (baud is not None and baud != self.baudrate) or (
+            parity is not None and self.parity is not None and parity != self.parity
+        )
 
     @property
     def drives(self) -> tuple[SimDrive, ...]:
@@ -210,6 +244,10 @@ class SimLine:
                        to_master=self.faults.echo)  # fmt: skip
         self._schedule(burst, now)
         self._master_end = burst.end
+        if self.master_misframed:  # the drives hear other characters than were sent
+            heard = bytearray(self._rng.randrange(1, 256) ^ byte for byte in data)
+            self.counters.misframed_bytes += len(data)
+            burst = dataclasses.replace(burst, data=heard)
         self._chunks.append((self._fed, now))
         self._fed += len(data)
         # Byte by byte, as the drives hear it: a reply to a telegram early in this burst
@@ -228,13 +266,22 @@ class SimLine:
         """Take every byte that has reached the master by now."""
         now = self._clock.now()
         out = bytearray()
+        adapter = self.adapter
         while self._deliveries and self._deliveries[0][0] <= now:
-            out += heapq.heappop(self._deliveries)[2].data
-        return bytes(out)
+            burst = heapq.heappop(self._deliveries)[2]
+            if adapter is None:
+                out += burst.data
+            else:
+                adapter.hold(burst.data, burst.end, self.char_s)
+        return bytes(out) if adapter is None else adapter.release(now)
 
     def next_delivery(self) -> float | None:
         """When the next bytes reach the master, or None if nothing is on its way."""
-        return self._deliveries[0][0] if self._deliveries else None
+        wire = self._deliveries[0][0] if self._deliveries else None
+        held = self.adapter.next_release() if self.adapter is not None else None
+        if wire is None or held is None:
+            return held if wire is None else wire
+        return min(wire, held)
 
     # -- requests and replies -------------------------------------------------------------
 

@@ -28,7 +28,8 @@ baseline back, ready for the next open — the *other* one of the two, so that a
 landing between a client's ``TCSETS`` and glibc's read-back still counts as a change. A
 client that reopens within the loop's reaction time (tens of microseconds) can still meet
 its own settings and fail. The line's character format lives in the SimLine, not in
-termios.
+termios; the client's speed, read when it sets it, tells the line whether the master talks
+at the line's baud rate.
 """
 
 from __future__ import annotations
@@ -53,6 +54,12 @@ _TIOCPKT_IOCTL: Final = 0x40
 _EXTPROC: Final = getattr(termios, "EXTPROC", 0o200000)
 _BASELINE_SPEEDS: Final = (termios.B50, termios.B75)  # no client asks for these
 _LFLAG, _ISPEED, _OSPEED = 3, 4, 5  # indices into a tcgetattr list
+# termios speed constants → baud rates (B9600 → 9600); an unknown speed tells nothing
+_BAUD_OF_SPEED: Final = {
+    getattr(termios, name): int(name[1:])
+    for name in dir(termios)
+    if name[:1] == "B" and name[1:].isdigit() and int(name[1:]) > 0
+}
 
 
 class PtyServer:
@@ -150,9 +157,16 @@ class PtyServer:
             self._restore_baseline()
 
     def _restore_baseline(self) -> None:
-        """Put a baseline back after a client changed the termios (see the module docstring)."""
+        """Put a baseline back after a client changed the termios (see the module docstring).
+
+        The client's speed is what its line runs at: the simulated line hears it (a wrong
+        baud rate garbles every character). Parity cannot be told this way: Linux drops
+        PARENB from a pty's termios.
+        """
         try:
-            if termios.tcgetattr(self._slave) not in self._baselines:  # not our own change
+            attrs = termios.tcgetattr(self._slave)
+            if attrs not in self._baselines:  # not our own change
+                self.line.hear_master_at(_BAUD_OF_SPEED.get(attrs[_OSPEED]))
                 self._baseline ^= 1
                 termios.tcsetattr(self._slave, termios.TCSANOW, self._baselines[self._baseline])
         except termios.error:
@@ -208,9 +222,18 @@ class PtyServer:
 
 
 def _replace_link(target: str, link: str) -> None:
-    """Point ``link`` at ``target``, replacing an old symlink but never a real file."""
+    """Point ``link`` at ``target``; only a dangling symlink (a killed server's) is replaced.
+
+    A link that leads somewhere may be a real adapter's (``/dev/serial/by-id/…``) or another
+    server's pty: taking it over would hide that device, and removing it on exit lose it.
+    """
     if os.path.lexists(link) and not os.path.islink(link):
         raise PortError(f"{link} exists and is not a symbolic link; not replacing it")
+    if os.path.exists(link):  # follows the link: it leads to something
+        raise PortError(
+            f"{link} already links to {os.path.realpath(link)}; not replacing it "
+            "(remove it, or simulate the line at another path)"
+        )
     temporary = f"{link}.{os.getpid()}.tmp"
     os.symlink(target, temporary)
     os.replace(temporary, link)

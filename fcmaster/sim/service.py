@@ -13,6 +13,7 @@ The bus's optional ``simulation:`` section says what the drives do::
       faults: "drop=0.01,corrupt=0.005"    # the --faults form, or a mapping {drop: 0.01}
       response_delay_ms: 10                # every drive's (default: the bus's response_delay)
       load: 0.7                            # load torque at rated speed, fraction of rated
+      adapter_latency_ms: 16               # replies held as by a USB adapter's latency timer
       drives:                              # by address; overrides the keys above
         3: {load: 0.9, faults: "silent_at=60-70", local: false,
             response_delay_ms: 20, parameters: {"3-41": 5.0},
@@ -38,7 +39,9 @@ from fcmaster.sim.motor import MotorRating
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.sim.transport import SimTransport
 
-_LINE_KEYS: Final = frozenset({"seed", "faults", "response_delay_ms", "load", "drives"})
+_LINE_KEYS: Final = frozenset(
+    {"seed", "faults", "response_delay_ms", "load", "drives", "adapter_latency_ms"}
+)
 _DRIVE_KEYS: Final = frozenset(
     {"faults", "response_delay_ms", "load", "local", "parameters", "running_hz", "warning"}
 )
@@ -86,6 +89,12 @@ def sim_settings(
         address_encoding=plan.address_encoding, response_encoding=plan.response_encoding,
         fault_encoding=plan.fault_encoding,
     )  # fmt: skip
+    if "adapter_latency_ms" in simulation:
+        try:
+            latency = float(simulation["adapter_latency_ms"])
+            line = dataclasses.replace(line, adapter_latency_ms=latency)
+        except (FcmasterError, TypeError, ValueError) as exc:
+            raise ConfigError([(f"{where}.adapter_latency_ms", str(exc))]) from exc
     return line, drives
 
 

@@ -72,8 +72,14 @@ class LineSettings:
     address_encoding: str = "hex"
     response_encoding: str = "hex"
     fault_encoding: str = "hex"
+    # a USB adapter's latency timer between the line and the master (None: none, as a pty)
+    adapter_latency_ms: float | None = None
+    # repeated addresses are drives that both answer (a replaced drive left at the old one's)
+    duplicate_addresses: bool = False
 
     def __post_init__(self) -> None:
+        if self.adapter_latency_ms is not None and not 0 < self.adapter_latency_ms <= 255:
+            raise UsageError("an adapter's latency timer is 1-255 ms (FTDI allows 1-255)")
         if self.parity not in ("N", "E", "O"):
             raise UsageError(f"parity {self.parity!r} is not N, E or O")
         for name in ("address_encoding", "response_encoding", "fault_encoding"):

@@ -102,7 +102,9 @@ async def test_control_starts_stops_and_emergency_stops_a_drive() -> None:
         assert not sim.motor.output_on
 
         # Beyond the given maximum is refused before anything reaches the wire.
-        code, _, err = await fcmaster(server, "control", *args, "start", "--frequency", "60")
+        code, _, err = await fcmaster(
+            server, "control", *args, "--max-frequency", "55", "start", "--frequency", "60"
+        )
         assert code == 1
         assert "limit" in err
         assert not sim.control.running

@@ -108,7 +108,9 @@ async def test_control_starts_stops_and_resets_a_drive() -> None:
         assert sim.deaf_until > before  # HFD 9696 reached it: the drive is restarting
 
         # Beyond the given maximum is refused before anything reaches the wire.
-        code, _, err = await fcmaster(server, "control", *args, "start", "--frequency", "60")
+        code, _, err = await fcmaster(
+            server, "control", *args, "--max-frequency", "55", "start", "--frequency", "60"
+        )
         assert code == 1
         assert "limit" in err
         code, _, err = await fcmaster(server, "control", *args, "jog")
