@@ -32,11 +32,22 @@ from fcmaster.protocol.drive import ControlIntent
 
 @dataclass(slots=True, frozen=True)
 class Measured:
-    """One measured or read value."""
+    """One measured or read value, with the manual's name and the time it was read."""
 
     value: float | str
     unit: str
     raw: int | None = None
+    name: str = ""  # the manual's name ("Motor Current"); "" when the codec does not know it
+    updated_at: float | None = None  # wall-clock seconds of the reply that carried it
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"value", "unit", "name", "updated_at"}``."""
+        return {
+            "value": self.value,
+            "unit": self.unit,
+            "name": self.name,
+            "updated_at": rfc3339(self.updated_at),
+        }
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -55,6 +66,9 @@ class DriveState:
     direction: str = "forward"
     at_reference: bool = False
     output_frequency_hz: float | None = None
+    # When the output frequency was read: Mitsubishi and ENC read it in an exchange of its
+    # own, so it can be older than the status beside it (never presented as newer).
+    output_frequency_updated_at: float | None = None
     reference_pct: float | None = None  # what the master commands; None when it commands nothing
     status_word: int | None = None
     values: dict[str, Measured] = field(default_factory=dict)
@@ -82,9 +96,10 @@ class DriveState:
             "direction": self.direction,
             "at_reference": self.at_reference,
             "output_frequency_hz": self.output_frequency_hz,
+            "output_frequency_updated_at": rfc3339(self.output_frequency_updated_at),
             "reference_pct": self.reference_pct,
             "status_word": self.status_word,
-            "values": {name: {"value": m.value, "unit": m.unit} for name, m in self.values.items()},
+            "values": {name: m.to_json() for name, m in self.values.items()},
             "alarms": [{"code": c.code, "text": c.text} for c in self.alarms],
             "warnings": [{"code": c.code, "text": c.text} for c in self.warnings],
             "updated_at": rfc3339(self.updated_at),
@@ -220,9 +235,10 @@ class FleetState:
         """Fold one reply into the drive's snapshot."""
         key = f"{bus}/{drive.name}"
         old = self._states[key]
+        read_at = self._wall() - (self._clock.now() - at)
         changes: dict[str, Any] = {
             "online": True,
-            "updated_at": self._wall() - (self._clock.now() - at),
+            "updated_at": read_at,
             "reference_pct": None if commanded is None else commanded.reference_pct,
         }
         status = reply.status
@@ -240,17 +256,19 @@ class FleetState:
                 changes["direction"] = "reverse" if commanded.reverse else "forward"
         if reply.output_frequency_hz is not None:
             changes["output_frequency_hz"] = abs(reply.output_frequency_hz)
+            changes["output_frequency_updated_at"] = read_at
         elif reply.output_pct is not None:
             changes["output_frequency_hz"] = round(
                 abs(reply.output_pct) * drive.nominal_frequency_hz / 100.0, 3
             )
+            changes["output_frequency_updated_at"] = read_at
         if reply.value is not None:
             value = reply.value
             name = value.parameter.name
             if value.index:
                 name = f"{name}[{value.index}]"
             values = dict(old.values)
-            values[name] = Measured(value.value, value.unit, value.raw)
+            values[name] = Measured(value.value, value.unit, value.raw, value.title, read_at)
             changes["values"] = values
         if reply.conditions is not None:
             self._conditions(key, old, reply, changes)

@@ -31,6 +31,7 @@ DRIVE_KEYS = {
     "direction",
     "at_reference",
     "output_frequency_hz",
+    "output_frequency_updated_at",
     "reference_pct",
     "status_word",
     "values",
@@ -65,7 +66,14 @@ async def test_drives_lists_every_drive_state_in_configuration_order(
     assert set(drives[0]) == DRIVE_KEYS
     assert drives[0]["running"] is True
     assert drives[0]["output_frequency_hz"] == 42.5
-    assert drives[0]["values"] == {"16-14": {"value": 5.25, "unit": "A"}}
+    (current,) = drives[0]["values"].items()
+    assert current[0] == "16-14"
+    assert (current[1]["value"], current[1]["unit"], current[1]["name"]) == (
+        5.25,
+        "A",
+        "Motor Current",
+    )
+    assert current[1]["updated_at"] == drives[0]["updated_at"]
     assert drives[0]["updated_at"].endswith("Z")
     assert drives[1]["online"] is False
 

@@ -66,8 +66,9 @@ def test_every_drive_starts_offline_with_the_public_json_keys() -> None:
     assert state is not None
     assert set(state.to_json()) == {
         "name", "bus", "address", "protocol", "online", "control", "running", "fault",
-        "warning", "direction", "at_reference", "output_frequency_hz", "reference_pct",
-        "status_word", "values", "alarms", "warnings", "updated_at",
+        "warning", "direction", "at_reference", "output_frequency_hz",
+        "output_frequency_updated_at", "reference_pct", "status_word", "values", "alarms",
+        "warnings", "updated_at",
     }  # fmt: skip
     assert state.online is False
     assert state.control == "bus"
@@ -103,17 +104,40 @@ def test_direction_comes_from_the_reply_or_else_from_the_command() -> None:
     assert _get(fleet, "pump-1").direction == "forward"
 
 
-def test_parameter_values_accumulate_by_name_and_index() -> None:
+def test_parameter_values_accumulate_by_name_and_index_each_with_its_own_time() -> None:
     fleet, _, _ = _fleet()
     key = ParameterKey("16-14", 1614)
-    for index, value in ((0, 5.24), (3, 1.5)):
-        value_read = ParameterValue(parameter=key, index=index, raw=None, value=value, unit="A")
-        fleet.drive_replied("line1", PUMP, Reply(address=1, value=value_read), 500.0, None)
+    for index, value, at in ((0, 5.24, 500.5), (3, 1.5, 501.0)):
+        value_read = ParameterValue(
+            parameter=key, index=index, raw=None, value=value, unit="A", title="Motor Current"
+        )
+        fleet.drive_replied("line1", PUMP, Reply(address=1, value=value_read), at, None)
     values = _get(fleet, "pump-1").to_json()["values"]
     assert values == {
-        "16-14": {"value": 5.24, "unit": "A"},
-        "16-14[3]": {"value": 1.5, "unit": "A"},
+        "16-14": {
+            "value": 5.24,
+            "unit": "A",
+            "name": "Motor Current",
+            "updated_at": "2026-09-21T14:13:20.500Z",
+        },
+        "16-14[3]": {
+            "value": 1.5,
+            "unit": "A",
+            "name": "Motor Current",
+            "updated_at": "2026-09-21T14:13:21.000Z",
+        },
     }
+
+
+def test_a_frequency_read_apart_from_the_status_keeps_the_time_it_was_read() -> None:
+    fleet, _, clock = _fleet()
+    clock.time = 502.0
+    fleet.drive_replied("line1", PUMP, Reply(address=1, output_frequency_hz=42.0), 501.0, None)
+    fleet.drive_replied("line1", PUMP, Reply(address=1, status=_status()), 502.0, None)
+    state = _get(fleet, "pump-1").to_json()
+    assert (state["output_frequency_hz"], state["running"]) == (42.0, False)
+    assert state["output_frequency_updated_at"] == "2026-09-21T14:13:21.000Z"
+    assert state["updated_at"] == "2026-09-21T14:13:22.000Z"
 
 
 def test_alarms_from_several_words_are_united_and_each_change_is_one_event() -> None:
