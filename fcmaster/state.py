@@ -12,6 +12,14 @@ fields, which mean the same for every protocol.
 Alarms and warnings arrive per source word (FC: 16-90 and 16-91 are both alarms); the
 snapshot shows their union, and a change makes one ``ConditionChanged`` per code raised or
 cleared, so consumers never diff lists themselves.
+
+Every reply refreshes the snapshot (its times), but only a change a subscriber can see is
+*published* as a ``DriveUpdated``: a status bit, the status word, alarms, warnings, online,
+the commanded reference, the set of values, or the output frequency or a value moving
+beyond its deadband since the state last published — so slow drifts add up and go out once
+they cross it. A drive that keeps answering unchanged is published again every
+``heartbeat_s``, with its fresh times. A poll that changes nothing makes no event: on a
+steady fleet, most replies end here, and no subscriber does any work for them.
 """
 
 from __future__ import annotations
@@ -28,6 +36,14 @@ from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.clock import Clock
 from fcmaster.protocol.codec import Condition, Reply
 from fcmaster.protocol.drive import ControlIntent
+
+HEARTBEAT_S = 5.0  # an unchanged drive that keeps answering is published this often
+DEADBAND_PCT = 0.1  # of the nominal frequency for the output, of the reading for values
+# Fields whose every change is published (the analog ones go by the deadband).
+_DISCRETE = (
+    "online", "running", "fault", "warning", "direction", "at_reference", "status_word",
+    "reference_pct", "alarms", "warnings",
+)  # fmt: skip
 
 
 @dataclass(slots=True, frozen=True)
@@ -118,9 +134,20 @@ def rfc3339(wall: float | None) -> str | None:
 
 @dataclass(slots=True, frozen=True)
 class DriveUpdated:
-    """A drive's snapshot changed (conflated for slow subscribers: latest wins)."""
+    """A drive's snapshot changed (conflated for slow subscribers: latest wins).
+
+    ``changed`` names the public fields that changed since the drive was last published
+    (``values`` for any value); it is empty for a heartbeat.
+    """
 
     state: DriveState
+    changed: tuple[str, ...] = ()
+
+    def after(self, earlier: DriveUpdated) -> DriveUpdated:
+        """This update standing in for ``earlier`` too (conflation): the changes of both."""
+        if not earlier.changed:
+            return self
+        return DriveUpdated(self.state, tuple(dict.fromkeys(earlier.changed + self.changed)))
 
     @property
     def bus(self) -> str:
@@ -192,11 +219,17 @@ class FleetState:
         emit: Callable[[Event], None],
         clock: Clock,
         wall: Callable[[], float] = time.time,
+        heartbeat_s: float = HEARTBEAT_S,
+        deadband_pct: float = DEADBAND_PCT,
     ) -> None:
         self._emit = emit
         self._clock = clock
         self._wall = wall
+        self._heartbeat_s = heartbeat_s
+        self._band = deadband_pct / 100.0
         self._states: dict[str, DriveState] = {}
+        # what each drive's subscribers last saw, and when (monotonic)
+        self._published: dict[str, tuple[DriveState, float]] = {}
         self._plans: dict[str, DrivePlan] = {}
         self._sources: dict[str, dict[tuple[str, str], tuple[Condition, ...]]] = {}
         for line in lines:
@@ -209,6 +242,7 @@ class FleetState:
                     control="bus" if drive.control else "monitor",
                 )
                 self._states[state.key] = state
+                self._published[state.key] = (state, float("-inf"))
                 self._plans[state.key] = drive
                 self._sources[state.key] = {}
 
@@ -276,7 +310,43 @@ class FleetState:
         self._states[key] = new
         if not old.online:
             self._emit(AvailabilityChanged(bus=new.bus, drive=new.name, online=True))
-        self._emit(DriveUpdated(new))
+        self._publish(key, new, drive.nominal_frequency_hz)
+
+    def _publish(self, key: str, new: DriveState, nominal_frequency_hz: float) -> None:
+        """Emit ``new`` if a subscriber could see a change, or the heartbeat is due."""
+        sent, sent_at = self._published[key]
+        changed = self._changes(sent, new, nominal_frequency_hz)
+        now = self._clock.now()
+        if changed or now - sent_at >= self._heartbeat_s:
+            self._published[key] = (new, now)
+            self._emit(DriveUpdated(new, changed))
+
+    def _changes(
+        self, sent: DriveState, new: DriveState, nominal_frequency_hz: float
+    ) -> tuple[str, ...]:
+        """The public fields in which ``new`` differs visibly from the state last ``sent``."""
+        changed = [name for name in _DISCRETE if getattr(sent, name) != getattr(new, name)]
+        band = self._band
+        old_hz, new_hz = sent.output_frequency_hz, new.output_frequency_hz
+        if (old_hz is None) != (new_hz is None) or (
+            old_hz is not None
+            and new_hz is not None
+            and abs(new_hz - old_hz) > band * abs(nominal_frequency_hz)
+        ):
+            changed.append("output_frequency_hz")
+        if sent.values.keys() != new.values.keys():
+            changed.append("values")
+        else:
+            for name, measured in new.values.items():
+                old, value = sent.values[name].value, measured.value
+                if isinstance(old, str) or isinstance(value, str):
+                    moved = old != value
+                else:
+                    moved = abs(value - old) > band * max(abs(value), abs(old))
+                if moved:
+                    changed.append("values")
+                    break
+        return tuple(changed)
 
     def _conditions(self, key: str, old: DriveState, reply: Reply, changes: dict[str, Any]) -> None:
         report = reply.conditions
@@ -322,7 +392,7 @@ class FleetState:
         new = dataclasses.replace(old, online=online)
         self._states[key] = new
         self._emit(AvailabilityChanged(bus=new.bus, drive=new.name, online=online))
-        self._emit(DriveUpdated(new))
+        self._publish(key, new, drive.nominal_frequency_hz)
 
     def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
         """A line opened or was lost."""

@@ -168,3 +168,59 @@ def test_going_offline_keeps_the_last_values_and_emits_once() -> None:
     assert state.running  # last known, with its time
     assert events[0] == AvailabilityChanged(bus="line1", drive="fan-1", online=False)
     assert len([e for e in events if isinstance(e, AvailabilityChanged)]) == 1
+
+
+def _updates(events: list[Event]) -> list[DriveUpdated]:
+    return [e for e in events if isinstance(e, DriveUpdated)]
+
+
+def test_an_unchanged_reply_is_not_published_until_the_heartbeat() -> None:
+    fleet, events, clock = _fleet()
+    steady = Reply(address=1, status=_status(running=True), output_frequency_hz=42.0)
+    fleet.drive_replied("line1", PUMP, steady, 500.0, None)
+    (first,) = _updates(events)
+    assert set(first.changed) >= {"online", "running", "status_word", "output_frequency_hz"}
+    events.clear()
+    for n in range(1, 50):  # 4.9 s of polls every 0.1 s, nothing changes
+        clock.time = 500.0 + n * 0.1
+        fleet.drive_replied("line1", PUMP, steady, clock.time, None)
+    assert events == []
+    assert _get(fleet, "pump-1").updated_at == WALL_AT_START + 4.9  # the snapshot is fresh
+    clock.time = 505.0
+    fleet.drive_replied("line1", PUMP, steady, 505.0, None)
+    (heartbeat,) = _updates(events)
+    assert heartbeat.changed == ()
+    assert heartbeat.state.updated_at == WALL_AT_START + 5.0
+
+
+def test_a_drift_is_published_once_it_crosses_the_deadband_since_the_last_publication() -> None:
+    fleet, events, clock = _fleet()  # PUMP: 60 Hz nominal, deadband 0.1 %: 0.06 Hz
+    fleet.drive_replied("line1", PUMP, Reply(address=1, output_frequency_hz=30.0), 500.0, None)
+    events.clear()
+    published = []
+    for n, hz in enumerate((30.02, 30.04, 30.06, 30.08, 30.1, 30.12), 1):
+        clock.time = 500.0 + n * 0.1
+        fleet.drive_replied("line1", PUMP, Reply(address=1, output_frequency_hz=hz), 500.0, None)
+        published += [(hz, u.changed) for u in _updates(events)]
+        events.clear()
+    assert published == [(30.08, ("output_frequency_hz",))]
+
+
+def test_a_status_bit_or_a_value_beyond_its_deadband_is_published_at_once() -> None:
+    fleet, events, _ = _fleet()
+    key = ParameterKey("16-14", 1614)
+
+    def current(amps: float) -> Reply:
+        value = ParameterValue(parameter=key, index=0, raw=None, value=amps, unit="A")
+        return Reply(address=1, status=_status(), value=value)
+
+    fleet.drive_replied("line1", PUMP, current(8.0), 500.0, None)
+    events.clear()
+    fleet.drive_replied("line1", PUMP, current(8.005), 500.0, None)  # 0.06 %: within
+    assert events == []
+    fleet.drive_replied("line1", PUMP, current(8.02), 500.0, None)  # 0.25 %: beyond
+    assert [u.changed for u in _updates(events)] == [("values",)]
+    events.clear()
+    reply = Reply(address=1, status=_status(warning=True), value=current(8.02).value)
+    fleet.drive_replied("line1", PUMP, reply, 500.0, None)
+    assert [u.changed for u in _updates(events)] == [("warning",)]
