@@ -31,9 +31,11 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
+from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.clock import Clock
+from fcmaster.errors import FcmasterError
 from fcmaster.protocol.codec import Condition, Reply
 from fcmaster.protocol.drive import ControlIntent
 
@@ -55,15 +57,20 @@ class Measured:
     raw: int | None = None
     name: str = ""  # the manual's name ("Motor Current"); "" when the codec does not know it
     updated_at: float | None = None  # wall-clock seconds of the reply that carried it
+    # An alarm or warning word: the texts of the conditions it shows (None: not such a word)
+    texts: tuple[str, ...] | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """``{"value", "unit", "name", "updated_at"}``."""
-        return {
+        """``{"value", "unit", "name", "updated_at"}``, and ``texts`` for a condition word."""
+        out: dict[str, Any] = {
             "value": self.value,
             "unit": self.unit,
             "name": self.name,
             "updated_at": rfc3339(self.updated_at),
         }
+        if self.texts is not None:
+            out["texts"] = list(self.texts)
+        return out
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -120,6 +127,21 @@ class DriveState:
             "warnings": [{"code": c.code, "text": c.text} for c in self.warnings],
             "updated_at": rfc3339(self.updated_at),
         }
+
+
+def _monitored(line: LinePlan, drive: DrivePlan) -> frozenset[str] | None:
+    """The parameter names ``drive``'s values show (None: any, when the codec cannot say)."""
+    try:
+        codec = codec_for(line)
+        keys = (
+            codec.default_monitor()
+            if drive.monitor is None
+            else tuple(codec.parameter(p) for p in drive.monitor)
+        )
+        words = codec.condition_parameters(alarms=True, warnings=True)
+    except FcmasterError:  # a plan the config would refuse; show what comes
+        return None
+    return frozenset(k.name for k in keys + words)
 
 
 def rfc3339(wall: float | None) -> str | None:
@@ -232,6 +254,8 @@ class FleetState:
         self._published: dict[str, tuple[DriveState, float]] = {}
         self._plans: dict[str, DrivePlan] = {}
         self._sources: dict[str, dict[tuple[str, str], tuple[Condition, ...]]] = {}
+        # the parameters each drive's values show: its monitor list and condition words
+        self._monitored: dict[str, frozenset[str] | None] = {}
         for line in lines:
             for drive in line.drives:
                 state = DriveState(
@@ -245,6 +269,7 @@ class FleetState:
                 self._published[state.key] = (state, float("-inf"))
                 self._plans[state.key] = drive
                 self._sources[state.key] = {}
+                self._monitored[state.key] = _monitored(line, drive)
 
     def snapshot(self) -> list[DriveState]:
         """Every drive, in configuration order."""
@@ -296,13 +321,19 @@ class FleetState:
                 abs(reply.output_pct) * drive.nominal_frequency_hz / 100.0, 3
             )
             changes["output_frequency_updated_at"] = read_at
-        if reply.value is not None:
-            value = reply.value
+        value = reply.value
+        monitored = self._monitored[key]
+        if value is not None and (monitored is None or value.parameter.name in monitored):
+            # A one-off read of anything else is its caller's answer, not a monitored value.
             name = value.parameter.name
             if value.index:
                 name = f"{name}[{value.index}]"
+            texts = None
+            report = reply.conditions
+            if report is not None and report.source == value.parameter.name:
+                texts = tuple(c.text for c in report.active)  # an alarm or warning word
             values = dict(old.values)
-            values[name] = Measured(value.value, value.unit, value.raw, value.title, read_at)
+            values[name] = Measured(value.value, value.unit, value.raw, value.title, read_at, texts)
             changes["values"] = values
         if reply.conditions is not None:
             self._conditions(key, old, reply, changes)

@@ -224,3 +224,33 @@ def test_a_status_bit_or_a_value_beyond_its_deadband_is_published_at_once() -> N
     reply = Reply(address=1, status=_status(warning=True), value=current(8.02).value)
     fleet.drive_replied("line1", PUMP, reply, 500.0, None)
     assert [u.changed for u in _updates(events)] == [("warning",)]
+
+
+def test_a_one_off_read_is_not_mixed_into_the_monitored_values() -> None:
+    fleet, _, _ = _fleet()  # PUMP monitors the FC defaults: 16-13, 16-14, … 16-92
+    ramp = ParameterValue(
+        parameter=ParameterKey("3-41", 341), index=0, raw=500, value=5.0, unit="s"
+    )
+    current = ParameterValue(
+        parameter=ParameterKey("16-14", 1614), index=0, raw=882, value=8.82, unit="A"
+    )
+    fleet.drive_replied("line1", PUMP, Reply(address=1, value=ramp), 500.0, None)
+    fleet.drive_replied("line1", PUMP, Reply(address=1, value=current), 500.0, None)
+    assert list(_get(fleet, "pump-1").values) == ["16-14"]
+
+
+def test_an_alarm_word_shows_the_texts_of_its_conditions() -> None:
+    fleet, _, _ = _fleet()
+    word = ParameterValue(
+        parameter=ParameterKey("16-92", 1692), index=0, raw=1 << 25, value=33554432.0, unit=""
+    )
+    report = ConditionReport(
+        kind="warning", source="16-92", active=(Condition(25, "Current limit"),)
+    )
+    fleet.drive_replied("line1", PUMP, Reply(address=1, value=word, conditions=report), 500.0, None)
+    assert _get(fleet, "pump-1").to_json()["values"]["16-92"]["texts"] == ["Current limit"]
+    cleared = ConditionReport(kind="warning", source="16-92", active=())
+    fleet.drive_replied(
+        "line1", PUMP, Reply(address=1, value=word, conditions=cleared), 500.0, None
+    )
+    assert _get(fleet, "pump-1").to_json()["values"]["16-92"]["texts"] == []
