@@ -36,9 +36,11 @@ from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.clock import Clock
 from fcmaster.errors import FcmasterError
+from fcmaster.history import History, Series
 from fcmaster.protocol.codec import Condition, Reply
 from fcmaster.protocol.drive import ControlIntent
 
+_FREQUENCY = Series("output_frequency_hz", "Output frequency", "Hz")
 HEARTBEAT_S = 5.0  # an unchanged drive that keeps answering is published this often
 DEADBAND_PCT = 0.1  # of the nominal frequency for the output, of the reading for values
 # Fields whose every change is published (the analog ones go by the deadband).
@@ -249,6 +251,7 @@ class FleetState:
         self._wall = wall
         self._heartbeat_s = heartbeat_s
         self._band = deadband_pct / 100.0
+        self.history = History()  # what was published, for charts opened later
         self._states: dict[str, DriveState] = {}
         # what each drive's subscribers last saw, and when (monotonic)
         self._published: dict[str, tuple[DriveState, float]] = {}
@@ -351,6 +354,18 @@ class FleetState:
         if changed or now - sent_at >= self._heartbeat_s:
             self._published[key] = (new, now)
             self._emit(DriveUpdated(new, changed))
+            self._record(key, new)
+
+    def _record(self, key: str, state: DriveState) -> None:
+        series = [_FREQUENCY]
+        values: dict[str, float | None] = {}
+        for name, measured in state.values.items():
+            if measured.texts is None and not isinstance(measured.value, str):
+                series.append(Series(name, measured.name or name, measured.unit))
+                values[name] = measured.value if state.online else None
+        values[_FREQUENCY.key] = state.output_frequency_hz if state.online else None
+        at = state.updated_at if state.online and state.updated_at is not None else self._wall()
+        self.history.record_drive(key, at, values, tuple(series))
 
     def _changes(
         self, sent: DriveState, new: DriveState, nominal_frequency_hz: float
@@ -428,6 +443,11 @@ class FleetState:
     def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
         """A line opened or was lost."""
         self._emit(LineChanged(bus=bus, up=up, reason=reason))
+
+    def line_sampled(self, bus: str, up: bool, stats: dict[str, Any]) -> None:
+        """A line's statistics were sampled: kept in its history and published."""
+        self.history.record_line(bus, self._wall(), stats)
+        self._emit(LineChanged(bus=bus, up=up, stats=stats))
 
     def command_completed(
         self, bus: str, drive: str, command: Command, result: CommandResult

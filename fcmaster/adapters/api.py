@@ -248,6 +248,21 @@ def create_app(
         """Every line with its statistics (histogram buckets end at ``le: "+Inf"``)."""
         return json_response([line.to_json() for line in gateway.lines()])
 
+    @app.get("/api/v1/drives/{name}/history", responses={**_AUTH_ERRORS, 404: _DRIVE_ERRORS[404]})
+    async def drive_history(name: str, _: Viewer) -> Response:
+        """The drive's recent samples (15 min), as columns: ``t`` and one list per series."""
+        state = gateway.fleet.find(name)
+        if state is None:
+            raise HTTPException(404, f"no drive called {name!r}")
+        return json_response({"drive": name, **gateway.fleet.history.drive(state.key)})
+
+    @app.get("/api/v1/buses/{name}/history", responses={**_AUTH_ERRORS, 404: _DRIVE_ERRORS[404]})
+    async def bus_history(name: str, _: Viewer) -> Response:
+        """The line's recent rates (15 min): requests, replies, timeouts, errors per second."""
+        if all(line.name != name for line in gateway.lines()):
+            raise HTTPException(404, f"no line called {name!r}")
+        return json_response({"bus": name, **gateway.fleet.history.line(name)})
+
     @app.get("/api/v1/whoami", response_model=PrincipalOut, responses=_AUTH_ERRORS)
     async def whoami(principal: Viewer) -> Response:
         """The caller's name and role, as the API sees them."""

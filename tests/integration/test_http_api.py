@@ -111,6 +111,37 @@ async def test_buses_show_statistics_with_histograms_in_strict_json(
     assert line["stats"]["latency_s"]["buckets"][-1] == {"le": "+Inf", "count": 1}
 
 
+async def test_a_drive_s_history_comes_as_columns_with_names_and_units(
+    gateway: FakeGateway, client: httpx.AsyncClient
+) -> None:
+    gateway.reply("pump-1", running=True, hz=42.5, value=("16-14", 5.25, "A"))
+    response = await client.get("/api/v1/drives/pump-1/history", headers=VIEWER)
+    assert response.status_code == 200
+    history = response.json()
+    assert (history["drive"], history["window_s"], len(history["t"])) == ("pump-1", 900.0, 1)
+    assert [(s["key"], s["name"], s["unit"], s["data"]) for s in history["series"]] == [
+        ("output_frequency_hz", "Output frequency", "Hz", [42.5]),
+        ("16-14", "Motor Current", "A", [5.25]),
+    ]
+    missing = await client.get("/api/v1/drives/nope/history", headers=VIEWER)
+    assert missing.status_code == 404
+    assert (await client.get("/api/v1/drives/pump-1/history")).status_code == 401
+
+
+async def test_a_line_s_history_has_its_rates(
+    gateway: FakeGateway, client: httpx.AsyncClient
+) -> None:
+    stats = gateway.lines()[0].stats
+    gateway.fleet.line_sampled("line1", True, {**stats, "requests": 0})
+    gateway.fleet.line_sampled("line1", True, {**stats, "requests": 10})
+    response = await client.get("/api/v1/buses/line1/history", headers=VIEWER)
+    assert response.status_code == 200
+    history = response.json()
+    assert len(history["t"]) == 1
+    assert history["series"]["requests_per_s"][0] > 0
+    assert (await client.get("/api/v1/buses/nope/history", headers=VIEWER)).status_code == 404
+
+
 async def test_whoami_names_the_token_and_its_role(client: httpx.AsyncClient) -> None:
     response = await client.get("/api/v1/whoami", headers=OPERATOR)
     assert response.json() == {"name": "ops", "role": "operator"}
