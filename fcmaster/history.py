@@ -25,6 +25,7 @@ from typing import Any, Final
 
 WINDOW_S: Final = 15 * 60.0
 SPACING_S: Final = 2.0
+EVENTS_KEPT: Final = 30  # a drive's recent discrete events (alarms, availability, commands)
 # LineStats counters shown as rates, and the error counters summed into "errors"
 _LINE_RATES: Final = ("requests", "replies", "timeouts", "retries")
 _LINE_ERRORS: Final = ("checksum_errors", "malformed", "unexpected")
@@ -76,6 +77,7 @@ class History:
         self._series: dict[str, dict[str, Series]] = {}
         self._lines: dict[str, _Ring] = {}
         self._counters: dict[str, tuple[float, Mapping[str, Any]]] = {}
+        self._events: dict[str, deque[tuple[float, object]]] = {}
 
     def _ring(self, rings: dict[str, _Ring], key: str) -> _Ring:
         ring = rings.get(key)
@@ -111,6 +113,17 @@ class History:
                 {"key": s.key, "name": s.name, "unit": s.unit, "data": data[s.key]} for s in series
             ],
         }
+
+    def record_event(self, key: str, t: float, event: object) -> None:
+        """A discrete event of drive ``key`` at wall time ``t`` (the newest are kept)."""
+        kept = self._events.get(key)
+        if kept is None:
+            kept = self._events[key] = deque(maxlen=EVENTS_KEPT)
+        kept.append((t, event))
+
+    def events(self, key: str) -> list[tuple[float, object]]:
+        """Drive ``key``'s recent events, oldest first, with their wall times."""
+        return list(self._events.get(key, ()))
 
     def record_line(self, bus: str, t: float, stats: Mapping[str, Any]) -> None:
         """A line's statistics at wall time ``t``: rates since the previous sample."""

@@ -246,7 +246,7 @@ class FleetState:
         heartbeat_s: float = HEARTBEAT_S,
         deadband_pct: float = DEADBAND_PCT,
     ) -> None:
-        self._emit = emit
+        self._publish_event = emit
         self._clock = clock
         self._wall = wall
         self._heartbeat_s = heartbeat_s
@@ -273,6 +273,12 @@ class FleetState:
                 self._plans[state.key] = drive
                 self._sources[state.key] = {}
                 self._monitored[state.key] = _monitored(line, drive)
+
+    def _emit(self, event: Event) -> None:
+        """Publish ``event``; a drive's discrete events are also kept in its history."""
+        if isinstance(event, ConditionChanged | AvailabilityChanged | CommandCompleted):
+            self.history.record_event(f"{event.bus}/{event.drive}", self._wall(), event)
+        self._publish_event(event)
 
     def snapshot(self) -> list[DriveState]:
         """Every drive, in configuration order."""

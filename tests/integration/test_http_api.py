@@ -123,6 +123,8 @@ async def test_a_drive_s_history_comes_as_columns_with_names_and_units(
         ("output_frequency_hz", "Output frequency", "Hz", [42.5]),
         ("16-14", "Motor Current", "A", [5.25]),
     ]
+    assert [(e["type"], e["online"]) for e in history["events"]] == [("availability", True)]
+    assert history["events"][0]["at"].endswith("Z")
     missing = await client.get("/api/v1/drives/nope/history", headers=VIEWER)
     assert missing.status_code == 404
     assert (await client.get("/api/v1/drives/pump-1/history")).status_code == 401

@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import itertools
 import os
+import re
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -28,9 +29,17 @@ from playwright.async_api import (
 
 from fcmaster.bus.commands import Action
 from fcmaster.cli import DEMO_CONFIG
+from fcmaster.commands.daemon import with_http_listen
 from fcmaster.config import load as load_config
+from fcmaster.service import Service
 from tests.integration.gateway_double import FakeGateway
-from tests.integration.http_harness import OPERATOR_TOKEN, http_model, serving
+from tests.integration.http_harness import (
+    OPERATOR_TOKEN,
+    http_model,
+    serving,
+    wait_until_listening,
+)
+from tests.integration.ports import free_port
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = [
@@ -317,3 +326,39 @@ async def test_the_drive_view_shows_status_values_and_charts_with_axes(browser: 
         await page.go_back()
         await expect(page.get_by_test_id("drives")).to_be_visible()
         assert problems == []
+
+
+async def test_the_running_demo_shows_names_and_units_not_parameter_numbers(
+    browser: Browser, tmp_path: Path
+) -> None:
+    """The real demo (simulated lines, real codecs); FCMASTER_SCREENSHOT=docs/dashboard.png
+    also writes the README's screenshots from it (the fleet, and a drive's view)."""
+    target = os.environ.get("FCMASTER_SCREENSHOT")
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    service = Service(with_http_listen(DEMO, f"127.0.0.1:{port}"), demo=True)
+    task = asyncio.create_task(service.run(install_signals=False), name="test.demo")
+    try:
+        await wait_until_listening(url, timeout_s=30)
+        page, problems = await _open(browser, url + "/", 1280, 900)
+        await expect(page.locator("#drives tbody tr")).to_have_count(10)
+        pump = page.locator('tr[data-drive="supply-pump-1"]')
+        await expect(pump.get_by_test_id("values")).to_contain_text("Motor Current", timeout=15000)
+        await expect(pump.get_by_test_id("values")).to_contain_text("DC Link Voltage")
+        names = await page.locator("#drives .values .vname").all_text_contents()
+        assert names
+        assert [n for n in names if re.fullmatch(r"\d{1,2}-\d{2}", n)] == []  # never a number
+        texts = await page.locator("#drives .values").all_text_contents()
+        assert not [t for t in texts if re.search(r"\d{7,}", t)]  # no alarm word as a number
+        if target:
+            await asyncio.sleep(20)  # some history for the charts
+            await page.screenshot(path=target, full_page=True)
+            await page.locator('tr[data-drive="cooling-fan-1"]').get_by_test_id("open").click()
+            await expect(page.locator(".u-title").first).to_be_visible()
+            drive_shot = Path(target).with_name(Path(target).stem + "-drive.png")
+            await page.screenshot(path=drive_shot, full_page=True)
+        assert problems == []
+    finally:
+        service.stop()
+        async with asyncio.timeout(10):
+            await task

@@ -58,6 +58,7 @@ function fmt(value, digits = 1) {
 
 function fmtValue(value) {
   if (typeof value !== "number") return fmt(value);
+  if (Number.isInteger(value) && Math.abs(value) >= 1000) return String(value);
   const size = Math.abs(value);
   return value.toFixed(size >= 1000 ? 0 : size >= 100 ? 1 : 2);
 }
@@ -175,23 +176,30 @@ function handle(message) {
       break;
     }
     case "condition":
-      logEvent(`${message.drive}: ${message.kind} ${message.code} ${message.text} ` +
-               (message.active ? "raised" : "cleared"), message.active ? message.kind : "", message.drive);
-      break;
     case "availability":
-      logEvent(`${message.drive} went ${message.online ? "online" : "offline"}`,
-               message.online ? "" : "warning", message.drive);
-      break;
     case "command":
-      logEvent(`${message.drive}: ${message.command.action} by ${message.command.actor || "?"} → ` +
-               `${message.result.outcome}${message.result.reason ? ` (${message.result.reason})` : ""}`,
-               "", message.drive);
+      logEvent(...eventText(message), message.drive);
       break;
     case "dropped":
       logEvent(`${message.count} events missed (this page fell behind)`, "warning");
       break;
   }
   schedule();
+}
+
+// A drive's event message as [text, class].
+function eventText(message) {
+  switch (message.type) {
+    case "condition":
+      return [`${message.drive}: ${message.kind} ${message.code} ${message.text} ` +
+              (message.active ? "raised" : "cleared"), message.active ? message.kind : ""];
+    case "availability":
+      return [`${message.drive} went ${message.online ? "online" : "offline"}`, message.online ? "" : "warning"];
+    case "command":
+      return [`${message.drive}: ${message.command.action} by ${message.command.actor || "?"} → ` +
+              `${message.result.outcome}${message.result.reason ? ` (${message.result.reason})` : ""}`, ""];
+  }
+  return [JSON.stringify(message), ""];
 }
 
 function schedule() {
@@ -464,6 +472,10 @@ async function openDrive(name) {
   if (detail !== current) return;  // another view was opened meanwhile
   if (!response.ok) { $("dv-charts").textContent = `No history: HTTP ${response.status}`; return; }
   const history = await response.json();
+  // the daemon's record of this drive's events, newest first, as the page keeps them
+  driveEvents.set(name, (history.events || []).map((message) =>
+    [clock(seconds(message.at)), ...eventText(message)]).reverse());
+  renderDriveEvents(name);
   current.t = history.t;
   current.series = history.series;
   buildCharts(current, $("dv-charts"), history.series.map((s) => [s.key, s.name, s.unit]));
@@ -535,7 +547,7 @@ async function readParameter(event) {
 
 const LINE_SERIES = [
   ["requests_per_s", "Requests", "/s"], ["timeouts_per_s", "Timeouts", "/s"],
-  ["errors_per_s", "Errors (checksum, malformed, unexpected)", "/s"],
+  ["errors_per_s", "Errors", "/s"],
 ];
 
 async function openLine(name) {
@@ -563,7 +575,10 @@ function updateLineView() {
   if (!bus) return;
   const facts = [["port", bus.up ? "up" : "down"]];
   for (const [key, value] of Object.entries(bus.stats || {})) {
-    if (typeof value === "number") facts.push([key.replaceAll("_", " "), key === "utilisation" ? `${fmt(value * 100)} %` : fmtValue(value)]);
+    if (typeof value === "number") {
+      const text = key === "utilisation" ? `${fmt(value * 100)} %` : Number.isInteger(value) ? String(value) : fmtValue(value);
+      facts.push([key.replaceAll("_", " "), text]);
+    }
     else if (typeof value === "string" || typeof value === "boolean") facts.push([key.replaceAll("_", " "), String(value)]);
   }
   replaceIf(detail, "stats", JSON.stringify(facts), $("lv-stats"),
@@ -585,14 +600,15 @@ function sampleLine(bus) {
 function buildCharts(state, box, specs) {
   box.replaceChildren();
   if (typeof uPlot === "undefined") { box.textContent = "The chart library did not load."; return; }
+  // every holder first, so each is measured in the finished grid
+  const holders = specs.map(([key]) => box.appendChild(el("div", { class: "chart", "data-series": key })));
   state.charts = specs.map(([key, title, unit], i) => {
-    const holder = el("div", { class: "chart", "data-series": key });
-    box.append(holder);
-    const width = Math.max(260, holder.clientWidth - 10);
+    const named = !unit || unit === "/s" || title.includes(`[${unit}]`);
     const opts = {
-      title: unit && unit !== "/s" ? `${title} [${unit}]` : title,
-      width, height: 200,
-      scales: { x: { time: true } },
+      title: named ? title : `${title} [${unit}]`,
+      width: chartWidth(holders[i]), height: 200,
+      // at least a minute wide, so a few points do not spread over years
+      scales: { x: { time: true, range: xRange } },
       legend: { show: false },
       series: [{}, { label: title, stroke: "#2b6cb0", width: 1.5, spanGaps: false }],
       axes: [
@@ -600,9 +616,16 @@ function buildCharts(state, box, specs) {
         { label: unit || "", labelSize: 18, size: 55 },
       ],
     };
-    return new uPlot(opts, [state.t, state.series[i].data], holder);
+    return new uPlot(opts, [state.t, state.series[i].data], holders[i]);
   });
 }
+
+function xRange(u, min, max) {
+  if (min == null || max == null) { const now = Date.now() / 1000; return [now - 60, now]; }
+  return [Math.min(min, max - 60), max];
+}
+
+const chartWidth = (holder) => Math.max(240, holder.clientWidth - 12);
 
 function addPoint(state, at, values) {
   state.t.push(at);
@@ -618,7 +641,7 @@ function resizeCharts() {
   if (!detail) return;
   for (const chart of detail.charts) {
     const holder = chart.root.parentElement;
-    chart.setSize({ width: Math.max(260, holder.clientWidth - 10), height: 200 });
+    chart.setSize({ width: chartWidth(holder), height: 200 });
   }
 }
 
