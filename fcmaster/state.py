@@ -25,6 +25,7 @@ steady fleet, most replies end here, and no subscriber does any work for them.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -38,9 +39,19 @@ from fcmaster.clock import Clock
 from fcmaster.errors import FcmasterError
 from fcmaster.history import History, Series
 from fcmaster.protocol.codec import Condition, Reply
+from fcmaster.protocol.danfoss_fc import StatusWord
 from fcmaster.protocol.drive import ControlIntent
+from fcmaster.protocol.enc import StateWord
+from fcmaster.protocol.mitsubishi import StatusBits
 
 _FREQUENCY = Series("output_frequency_hz", "Output frequency", "Hz")
+# Each protocol's status word, bit by bit, as its manual names the bits (for people: the
+# normalised flags beside it are what programs should use).
+_STATUS_BITS: dict[str, type[enum.IntFlag]] = {
+    "danfoss-fc": StatusWord,
+    "mitsubishi": StatusBits,
+    "enc": StateWord,
+}
 HEARTBEAT_S = 5.0  # an unchanged drive that keeps answering is published this often
 DEADBAND_PCT = 0.1  # of the nominal frequency for the output, of the reading for values
 # Fields whose every change is published (the analog ones go by the deadband).
@@ -106,6 +117,14 @@ class DriveState:
         """``bus/name``, unique in the fleet."""
         return f"{self.bus}/{self.name}"
 
+    @property
+    def status_bits(self) -> list[str]:
+        """The names of the status word's set bits, as the protocol's manual names them."""
+        flags = _STATUS_BITS.get(self.protocol)
+        if flags is None or self.status_word is None:
+            return []
+        return [str(f.name).lower() for f in flags if f.value and self.status_word & f.value]
+
     def to_json(self) -> dict[str, Any]:
         """The public JSON shape shown on every surface."""
         return {
@@ -124,6 +143,7 @@ class DriveState:
             "output_frequency_updated_at": rfc3339(self.output_frequency_updated_at),
             "reference_pct": self.reference_pct,
             "status_word": self.status_word,
+            "status_bits": self.status_bits,
             "values": {name: m.to_json() for name, m in self.values.items()},
             "alarms": [{"code": c.code, "text": c.text} for c in self.alarms],
             "warnings": [{"code": c.code, "text": c.text} for c in self.warnings],

@@ -128,6 +128,9 @@ class DriveOut(BaseModel):
     )
     reference_pct: float | None
     status_word: int | None
+    status_bits: list[str] = Field(
+        description="the status word's set bits, named as the protocol's manual names them"
+    )
     values: dict[str, ValueOut]
     alarms: list[ConditionOut]
     warnings: list[ConditionOut]

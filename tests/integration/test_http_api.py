@@ -34,6 +34,7 @@ DRIVE_KEYS = {
     "output_frequency_updated_at",
     "reference_pct",
     "status_word",
+    "status_bits",
     "values",
     "alarms",
     "warnings",

@@ -302,7 +302,10 @@ async def test_the_drive_view_shows_status_values_and_charts_with_axes(browser: 
         view = page.get_by_test_id("drive-view")
         await expect(view).to_be_visible()
         await expect(page.get_by_test_id("drives")).to_be_hidden()
-        await expect(view.get_by_test_id("dv-status")).to_contain_text("0x")
+        await expect(view.get_by_test_id("dv-status")).to_contain_text("0x0E07")
+        await expect(view.get_by_test_id("dv-status")).to_contain_text(
+            "bus control, frequency ok, running"
+        )
         await expect(view.get_by_test_id("dv-values")).to_contain_text("Motor Current (16-14)")
         await expect(view.get_by_test_id("dv-conditions")).to_contain_text(
             "warning 1: 10 Volts low"

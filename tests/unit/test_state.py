@@ -67,7 +67,8 @@ def test_every_drive_starts_offline_with_the_public_json_keys() -> None:
     assert set(state.to_json()) == {
         "name", "bus", "address", "protocol", "online", "control", "running", "fault",
         "warning", "direction", "at_reference", "output_frequency_hz",
-        "output_frequency_updated_at", "reference_pct", "status_word", "values", "alarms",
+        "output_frequency_updated_at", "reference_pct", "status_word", "status_bits", "values",
+        "alarms",
         "warnings", "updated_at",
     }  # fmt: skip
     assert state.online is False
@@ -254,3 +255,16 @@ def test_an_alarm_word_shows_the_texts_of_its_conditions() -> None:
         "line1", PUMP, Reply(address=1, value=word, conditions=cleared), 500.0, None
     )
     assert _get(fleet, "pump-1").to_json()["values"]["16-92"]["texts"] == []
+
+
+def test_status_bits_are_named_as_each_protocol_s_manual_names_them() -> None:
+    def bits(protocol: str, word: int) -> list[str]:
+        state = DriveState(
+            name="d", bus="l", address=1, protocol=protocol, control="monitor", status_word=word
+        )
+        return list(state.to_json()["status_bits"])
+
+    assert bits("danfoss-fc", 0x0808) == ["trip", "running"]  # bits 3 and 11
+    assert bits("mitsubishi", 0x4B) == ["run", "forward", "su", "fu"]
+    assert bits("enc", 0x11) == ["running", "normal_run"]
+    assert DriveState(name="d", bus="l", address=1, protocol="enc", control="bus").status_bits == []

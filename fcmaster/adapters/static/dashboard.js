@@ -486,6 +486,7 @@ function updateDriveView(d) {
   const facts = [
     ["status word", d.status_word == null ? "–" : `0x${d.status_word.toString(16).toUpperCase().padStart(4, "0")}`],
     ["bits", d.status_word == null ? "–" : d.status_word.toString(2).padStart(16, "0").replace(/(.{4})(?=.)/g, "$1 ")],
+    ["bits set", (d.status_bits || []).map((b) => b.replaceAll("_", " ")).join(", ") || "none"],
     ["online", d.online ? "yes" : "no"], ["running", d.running ? "yes" : "no"],
     ["direction", d.direction], ["at reference", d.at_reference ? "yes" : "no"],
     ["fault", d.fault ? "yes" : "no"], ["warning", d.warning ? "yes" : "no"],
