@@ -27,10 +27,11 @@ from playwright.async_api import (
     expect,
 )
 
-from fcmaster.bus.commands import Action
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.cli import DEMO_CONFIG
 from fcmaster.commands.daemon import with_http_listen
 from fcmaster.config import load as load_config
+from fcmaster.protocol.codec import ParameterKey, ParameterValue
 from fcmaster.service import Service
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
@@ -288,8 +289,15 @@ async def test_the_demo_fleet_fits_without_scrolling_sideways(
         assert problems == []
 
 
+def _ramp_time(_drive: str, command: Command) -> CommandResult:
+    """A read of 3-41 answers 5 s, as the drive would."""
+    key = ParameterKey(command.parameter or "", 341)
+    value = ParameterValue(parameter=key, index=0, raw=500, value=5.0, unit="s")
+    return CommandResult(outcome=Outcome.DONE, value=value)
+
+
 async def test_the_drive_view_shows_status_values_and_charts_with_axes(browser: Browser) -> None:
-    gateway = FakeGateway(lines=DEMO.lines)
+    gateway = FakeGateway(lines=DEMO.lines, respond=_ramp_time)
     async with serving(gateway) as adapter:
         for n in range(6):  # history before the page is opened
             gateway.reply("supply-pump-1", running=True, hz=40.0 + n,
@@ -326,6 +334,13 @@ async def test_the_drive_view_shows_status_values_and_charts_with_axes(browser: 
         assert first < opened_at - 1.0  # the daemon's history, not only what arrived since
         gateway.reply("supply-pump-1", running=True, hz=12.0)
         await page.wait_for_function("detail.series[0].data.at(-1) === 12.0")  # drawn live too
+        # a one-off read answers where it was asked, and stays out of the monitored values
+        await view.get_by_label("parameter").fill("3-41")
+        await view.get_by_role("button", name="Read").click()
+        await expect(view.get_by_test_id("dv-read-result")).to_contain_text("3-41 = 5.00 s")
+        ((drive, command),) = gateway.executed
+        assert (drive, command.action, command.parameter) == ("supply-pump-1", Action.READ, "3-41")
+        await expect(view.get_by_test_id("dv-values")).not_to_contain_text("3-41")
         await page.go_back()
         await expect(page.get_by_test_id("drives")).to_be_visible()
         assert problems == []

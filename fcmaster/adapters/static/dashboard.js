@@ -422,10 +422,14 @@ function renderLines() {
       cards.set(bus.name, card);
       box.append(card.node);
     }
-    put(card.pill, bus.up ? "up" : "down");
-    card.pill.className = `pill ${bus.up ? "pill-up" : "pill-down"}`;
-    put(card.where, [bus.port, bus.protocol, bus.baudrate && `${bus.baudrate} Bd`].filter(Boolean).join(" · "));
     const stats = bus.stats || {};
+    // line_silent and down_reason come with the line-fault statistics where the bus has them
+    const silent = bus.up && stats.line_silent === true;
+    put(card.pill, !bus.up ? "down" : silent ? "silent" : "up");
+    card.pill.className = `pill ${!bus.up ? "pill-down" : silent ? "pill-warn" : "pill-up"}`;
+    card.pill.title = silent ? "every drive fell silent together: cable, adapter or power?" : (stats.down_reason || "");
+    put(card.where, [bus.port, bus.protocol, bus.baudrate && `${bus.baudrate} Bd`, !bus.up && stats.down_reason]
+      .filter(Boolean).join(" · "));
     for (const [label, pick] of LINE_FACTS) put(card.facts.get(label), String(pick(stats) ?? "–"));
   }
 }
