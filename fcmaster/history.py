@@ -86,17 +86,15 @@ class History:
         return ring
 
     def record_drive(
-        self, key: str, t: float, values: Mapping[str, float | None], series: tuple[Series, ...]
+        self, key: str, t: float, values: Mapping[str, float | None], series: dict[str, Series]
     ) -> None:
         """One sample of drive ``key`` (``bus/name``) at wall time ``t``.
 
         ``values`` maps a series key to its value (None: not known then, a gap);
-        ``series`` describes the keys, so a reader can label its charts.
+        ``series`` describes every key, so a reader can label its charts (the caller's
+        mapping is kept, not copied: it may only grow).
         """
-        known = self._series.setdefault(key, {})
-        for item in series:
-            if item.key not in known:
-                known[item.key] = item
+        self._series[key] = series
         self._ring(self._drives, key).add(_Sample(t, values))
 
     def drive(self, key: str) -> dict[str, Any]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import operator
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -151,6 +152,40 @@ class DriveState:
         }
 
 
+_FIELDS = tuple(f.name for f in dataclasses.fields(DriveState))
+_fields_of = operator.attrgetter(*_FIELDS)
+_discrete = operator.attrgetter(*_DISCRETE)
+
+
+def _replace(state: DriveState, changes: dict[str, Any]) -> DriveState:
+    """``dataclasses.replace`` for a drive state, at a third of its cost (every reply pays it)."""
+    fields = dict(zip(_FIELDS, _fields_of(state), strict=True))
+    fields.update(changes)
+    return DriveState(**fields)
+
+
+class _Fresh:
+    """The reading times of replies that changed nothing, kept until the snapshot is read."""
+
+    __slots__ = ("frequency_at", "updated_at", "values_at")
+
+    def __init__(self, updated_at: float) -> None:
+        self.updated_at = updated_at
+        self.frequency_at: float | None = None
+        self.values_at: dict[str, float] = {}
+
+
+def _same_reading(old: Measured | None, new: Measured) -> bool:
+    """Whether ``new`` reads exactly what ``old`` did (its time aside)."""
+    return (
+        old is not None
+        and old.value == new.value
+        and old.unit == new.unit
+        and old.texts == new.texts
+        and old.name == new.name
+    )
+
+
 def _monitored(line: LinePlan, drive: DrivePlan) -> frozenset[str] | None:
     """The parameter names ``drive``'s values show (None: any, when the codec cannot say)."""
     try:
@@ -273,6 +308,8 @@ class FleetState:
         self._band = deadband_pct / 100.0
         self.history = History()  # what was published, for charts opened later
         self._states: dict[str, DriveState] = {}
+        self._fresh: dict[str, _Fresh] = {}  # times of unchanged replies not yet in _states
+        self._charted: dict[str, dict[str, Series]] = {}  # what each drive's history holds
         # what each drive's subscribers last saw, and when (monotonic)
         self._published: dict[str, tuple[DriveState, float]] = {}
         self._plans: dict[str, DrivePlan] = {}
@@ -290,6 +327,7 @@ class FleetState:
                 )
                 self._states[state.key] = state
                 self._published[state.key] = (state, float("-inf"))
+                self._charted[state.key] = {_FREQUENCY.key: _FREQUENCY}
                 self._plans[state.key] = drive
                 self._sources[state.key] = {}
                 self._monitored[state.key] = _monitored(line, drive)
@@ -302,18 +340,36 @@ class FleetState:
 
     def snapshot(self) -> list[DriveState]:
         """Every drive, in configuration order."""
-        return list(self._states.values())
+        return [self._current(key) for key in self._states]
 
     def get(self, bus: str, name: str) -> DriveState | None:
         """One drive's snapshot."""
-        return self._states.get(f"{bus}/{name}")
+        key = f"{bus}/{name}"
+        return self._current(key) if key in self._states else None
 
     def find(self, name: str) -> DriveState | None:
         """A drive by name alone (names are unique across the fleet)."""
-        for state in self._states.values():
+        for key, state in self._states.items():
             if state.name == name:
-                return state
+                return self._current(key)
         return None
+
+    def _current(self, key: str) -> DriveState:
+        """The drive's snapshot with the times of the unchanged replies since it was built."""
+        fresh = self._fresh.pop(key, None)
+        state = self._states[key]
+        if fresh is None:
+            return state
+        changes: dict[str, Any] = {"updated_at": fresh.updated_at}
+        if fresh.frequency_at is not None:
+            changes["output_frequency_updated_at"] = fresh.frequency_at
+        if fresh.values_at:
+            values = dict(state.values)
+            for name, read_at in fresh.values_at.items():
+                values[name] = dataclasses.replace(values[name], updated_at=read_at)
+            changes["values"] = values
+        state = self._states[key] = _replace(state, changes)
+        return state
 
     # -- BusObserver ---------------------------------------------------------------------
 
@@ -322,11 +378,10 @@ class FleetState:
     ) -> None:
         """Fold one reply into the drive's snapshot."""
         key = f"{bus}/{drive.name}"
-        old = self._states[key]
         read_at = self._wall() - (self._clock.now() - at)
+        old = self._states[key]  # its times may lag (see _current): only its content is used
         changes: dict[str, Any] = {
             "online": True,
-            "updated_at": read_at,
             "reference_pct": None if commanded is None else commanded.reference_pct,
         }
         status = reply.status
@@ -344,38 +399,67 @@ class FleetState:
                 changes["direction"] = "reverse" if commanded.reverse else "forward"
         if reply.output_frequency_hz is not None:
             changes["output_frequency_hz"] = abs(reply.output_frequency_hz)
-            changes["output_frequency_updated_at"] = read_at
         elif reply.output_pct is not None:
             changes["output_frequency_hz"] = round(
                 abs(reply.output_pct) * drive.nominal_frequency_hz / 100.0, 3
             )
-            changes["output_frequency_updated_at"] = read_at
-        value = reply.value
+        value, read, measured = reply.value, None, None
         monitored = self._monitored[key]
         if value is not None and (monitored is None or value.parameter.name in monitored):
             # A one-off read of anything else is its caller's answer, not a monitored value.
-            name = value.parameter.name
+            read = value.parameter.name
             if value.index:
-                name = f"{name}[{value.index}]"
+                read = f"{read}[{value.index}]"
             texts = None
             report = reply.conditions
             if report is not None and report.source == value.parameter.name:
                 texts = tuple(c.text for c in report.active)  # an alarm or warning word
-            values = dict(old.values)
-            values[name] = Measured(value.value, value.unit, value.raw, value.title, read_at, texts)
-            changes["values"] = values
-        if reply.conditions is not None:
+            measured = Measured(value.value, value.unit, value.raw, value.title, read_at, texts)
+        report = reply.conditions
+        if (
+            all(getattr(old, field) == given for field, given in changes.items())
+            and (measured is None or _same_reading(old.values.get(read or ""), measured))
+            and (
+                report is None
+                or self._sources[key].get((report.kind, report.source)) == report.active
+            )
+        ):
+            # Nothing but the times: no new snapshot, no event, until someone reads it or the
+            # heartbeat is due.
+            self._refresh(key, read_at, "output_frequency_hz" in changes, read)
+            if self._clock.now() - self._published[key][1] >= self._heartbeat_s:
+                self._publish(key, self._current(key), drive.nominal_frequency_hz)
+            return
+        old = self._current(key)
+        changes["updated_at"] = read_at
+        if "output_frequency_hz" in changes:
+            changes["output_frequency_updated_at"] = read_at
+        if measured is not None and read is not None:
+            changes["values"] = {**old.values, read: measured}
+        if report is not None:
             self._conditions(key, old, reply, changes)
-        new = dataclasses.replace(old, **changes)
+        new = _replace(old, changes)
         self._states[key] = new
         if not old.online:
             self._emit(AvailabilityChanged(bus=new.bus, drive=new.name, online=True))
-        self._publish(key, new, drive.nominal_frequency_hz)
+        self._publish(key, new, drive.nominal_frequency_hz, read)
 
-    def _publish(self, key: str, new: DriveState, nominal_frequency_hz: float) -> None:
+    def _refresh(self, key: str, read_at: float, frequency: bool, value: str | None) -> None:
+        fresh = self._fresh.get(key)
+        if fresh is None:
+            fresh = self._fresh[key] = _Fresh(read_at)
+        fresh.updated_at = read_at
+        if frequency:
+            fresh.frequency_at = read_at
+        if value is not None:
+            fresh.values_at[value] = read_at
+
+    def _publish(
+        self, key: str, new: DriveState, nominal_frequency_hz: float, read: str | None = None
+    ) -> None:
         """Emit ``new`` if a subscriber could see a change, or the heartbeat is due."""
         sent, sent_at = self._published[key]
-        changed = self._changes(sent, new, nominal_frequency_hz)
+        changed = self._changes(sent, new, nominal_frequency_hz, read)
         now = self._clock.now()
         if changed or now - sent_at >= self._heartbeat_s:
             self._published[key] = (new, now)
@@ -383,21 +467,29 @@ class FleetState:
             self._record(key, new)
 
     def _record(self, key: str, state: DriveState) -> None:
-        series = [_FREQUENCY]
-        values: dict[str, float | None] = {}
+        online = state.online
+        values: dict[str, float | None] = {
+            _FREQUENCY.key: state.output_frequency_hz if online else None
+        }
+        charted = self._charted[key]
         for name, measured in state.values.items():
             if measured.texts is None and not isinstance(measured.value, str):
-                series.append(Series(name, measured.name or name, measured.unit))
-                values[name] = measured.value if state.online else None
-        values[_FREQUENCY.key] = state.output_frequency_hz if state.online else None
-        at = state.updated_at if state.online and state.updated_at is not None else self._wall()
-        self.history.record_drive(key, at, values, tuple(series))
+                values[name] = measured.value if online else None
+                if name not in charted:
+                    charted[name] = Series(name, measured.name or name, measured.unit)
+        at = state.updated_at if online and state.updated_at is not None else self._wall()
+        self.history.record_drive(key, at, values, charted)
 
     def _changes(
-        self, sent: DriveState, new: DriveState, nominal_frequency_hz: float
+        self, sent: DriveState, new: DriveState, nominal_frequency_hz: float, read: str | None
     ) -> tuple[str, ...]:
-        """The public fields in which ``new`` differs visibly from the state last ``sent``."""
-        changed = [name for name in _DISCRETE if getattr(sent, name) != getattr(new, name)]
+        """The public fields in which ``new`` differs visibly from the state last ``sent``.
+
+        ``read`` is the value the reply that made ``new`` carried, if any.
+        """
+        changed: list[str] = []
+        if _discrete(sent) != _discrete(new):  # one C call each: the common case is equal
+            changed = [name for name in _DISCRETE if getattr(sent, name) != getattr(new, name)]
         band = self._band
         old_hz, new_hz = sent.output_frequency_hz, new.output_frequency_hz
         if (old_hz is None) != (new_hz is None) or (
@@ -408,16 +500,16 @@ class FleetState:
             changed.append("output_frequency_hz")
         if sent.values.keys() != new.values.keys():
             changed.append("values")
-        else:
-            for name, measured in new.values.items():
-                old, value = sent.values[name].value, measured.value
-                if isinstance(old, str) or isinstance(value, str):
-                    moved = old != value
-                else:
-                    moved = abs(value - old) > band * max(abs(value), abs(old))
-                if moved:
-                    changed.append("values")
-                    break
+        elif read is not None:
+            # Only the value this reply read can have moved since the last publication: any
+            # other was within the band when it was read, or it would have been published.
+            old, value = sent.values[read].value, new.values[read].value
+            if isinstance(old, str) or isinstance(value, str):
+                moved = old != value
+            else:
+                moved = abs(value - old) > band * max(abs(value), abs(old))
+            if moved:
+                changed.append("values")
         return tuple(changed)
 
     def _conditions(self, key: str, old: DriveState, reply: Reply, changes: dict[str, Any]) -> None:
@@ -458,7 +550,7 @@ class FleetState:
     def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
         """Mark a drive online or offline; its last values stay, with their time."""
         key = f"{bus}/{drive.name}"
-        old = self._states[key]
+        old = self._current(key)
         if old.online == online:
             return
         new = dataclasses.replace(old, online=online)

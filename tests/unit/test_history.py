@@ -6,7 +6,9 @@ FREQUENCY = Series("output_frequency_hz", "Output frequency", "Hz")
 def test_a_drive_keeps_two_samples_a_spacing_and_always_the_latest() -> None:
     history = History(window_s=60.0, spacing_s=2.0)
     for n in range(11):  # every 0.5 s for 5 s
-        history.record_drive("l/d", 100.0 + n * 0.5, {FREQUENCY.key: float(n)}, (FREQUENCY,))
+        history.record_drive(
+            "l/d", 100.0 + n * 0.5, {FREQUENCY.key: float(n)}, {FREQUENCY.key: FREQUENCY}
+        )
     out = history.drive("l/d")
     assert out["t"] == [100.0, 101.5, 103.0, 104.5, 105.0]  # no three within 2 s
     (series,) = out["series"]
@@ -21,7 +23,7 @@ def test_a_drive_keeps_two_samples_a_spacing_and_always_the_latest() -> None:
 def test_a_drive_ring_forgets_what_is_older_than_its_window_and_stays_bounded() -> None:
     history = History(window_s=10.0, spacing_s=1.0)
     for n in range(1000):
-        history.record_drive("l/d", float(n), {FREQUENCY.key: None}, (FREQUENCY,))
+        history.record_drive("l/d", float(n), {FREQUENCY.key: None}, {FREQUENCY.key: FREQUENCY})
     t = history.drive("l/d")["t"]
     assert t[0] >= 989.0
     assert t[-1] == 999.0
@@ -31,8 +33,13 @@ def test_a_drive_ring_forgets_what_is_older_than_its_window_and_stays_bounded() 
 def test_a_series_first_seen_later_has_gaps_before_it() -> None:
     history = History(window_s=60.0, spacing_s=1.0)
     current = Series("16-14", "Motor Current", "A")
-    history.record_drive("l/d", 1.0, {FREQUENCY.key: 10.0}, (FREQUENCY,))
-    history.record_drive("l/d", 2.0, {FREQUENCY.key: 11.0, "16-14": 4.0}, (FREQUENCY, current))
+    history.record_drive("l/d", 1.0, {FREQUENCY.key: 10.0}, {FREQUENCY.key: FREQUENCY})
+    history.record_drive(
+        "l/d",
+        2.0,
+        {FREQUENCY.key: 11.0, "16-14": 4.0},
+        {FREQUENCY.key: FREQUENCY, current.key: current},
+    )
     series = {s["key"]: s["data"] for s in history.drive("l/d")["series"]}
     assert series == {"output_frequency_hz": [10.0, 11.0], "16-14": [None, 4.0]}
 

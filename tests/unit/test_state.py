@@ -268,3 +268,24 @@ def test_status_bits_are_named_as_each_protocol_s_manual_names_them() -> None:
     assert bits("mitsubishi", 0x4B) == ["run", "forward", "su", "fu"]
     assert bits("enc", 0x11) == ["running", "normal_run"]
     assert DriveState(name="d", bus="l", address=1, protocol="enc", control="bus").status_bits == []
+
+
+def test_an_unchanged_reading_still_refreshes_the_times_the_snapshot_shows() -> None:
+    fleet, events, clock = _fleet()
+    current = ParameterValue(
+        parameter=ParameterKey("16-14", 1614), index=0, raw=882, value=8.82, unit="A"
+    )
+    steady = Reply(address=1, status=_status(running=True), output_pct=50.0, value=current)
+    fleet.drive_replied("line1", PUMP, steady, 500.0, None)
+    events.clear()
+    clock.time = 501.5
+    fleet.drive_replied("line1", PUMP, Reply(address=1, status=_status(running=True)), 501.0, None)
+    fleet.drive_replied("line1", PUMP, steady, 501.5, None)
+    assert events == []  # nothing a subscriber could see changed
+    state = _get(fleet, "pump-1")
+    assert (state.updated_at, state.output_frequency_updated_at) == (
+        WALL_AT_START + 1.5,
+        WALL_AT_START + 1.5,
+    )
+    assert state.values["16-14"].updated_at == WALL_AT_START + 1.5
+    assert fleet.snapshot()[0] is state  # built once, then kept until the next reply
