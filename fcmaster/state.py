@@ -13,46 +13,57 @@ Alarms and warnings arrive per source word (FC: 16-90 and 16-91 are both alarms)
 snapshot shows their union, and a change makes one ``ConditionChanged`` per code raised or
 cleared, so consumers never diff lists themselves.
 
-Every reply refreshes the snapshot (its times), but only a change a subscriber can see is
-*published* as a ``DriveUpdated``: a status bit, the status word, alarms, warnings, online,
-the commanded reference, the set of values, or the output frequency or a value moving
-beyond its deadband since the state last published — so slow drifts add up and go out once
-they cross it. A drive that keeps answering unchanged is published again every
-``heartbeat_s``, with its fresh times. A poll that changes nothing makes no event: on a
-steady fleet, most replies end here, and no subscriber does any work for them.
+Every reading keeps the time it was taken: ``updated_at`` (the last good reply),
+``output_frequency_updated_at`` and each value's ``updated_at`` — Mitsubishi and ENC read
+the frequency in an exchange of its own, so it may be older than the status beside it.
+
+Only a change a subscriber can see is *published* as a ``DriveUpdated``: a status bit, the
+status word, alarms, warnings, online, the commanded reference, the set of values, or the
+output frequency or a value moving beyond its deadband since the state last published — so
+slow drifts add up and go out once they cross it. A drive that keeps answering unchanged is
+published again every ``heartbeat_s``, with its fresh times.
+
+On a steady fleet most replies change nothing but times. Such a reply builds no snapshot:
+its times wait in a small mutable record (``_Fresh``) and are folded into a new snapshot
+when someone reads the drive (``get``, ``find``, ``snapshot``) or the heartbeat is due, so
+readers still see the time of the last reply.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import enum
 import operator
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from dataclasses import dataclass
 from typing import Any
 
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.clock import Clock
+from fcmaster.drive_state import DriveState, Measured, rfc3339
 from fcmaster.errors import FcmasterError
 from fcmaster.history import History, Series
 from fcmaster.protocol.codec import Condition, Reply
-from fcmaster.protocol.danfoss_fc import StatusWord
 from fcmaster.protocol.drive import ControlIntent
-from fcmaster.protocol.enc import StateWord
-from fcmaster.protocol.mitsubishi import StatusBits
+
+__all__ = [  # the snapshot's names are re-exported: readers import them from here
+    "DEADBAND_PCT",
+    "HEARTBEAT_S",
+    "AvailabilityChanged",
+    "CommandCompleted",
+    "ConditionChanged",
+    "DriveState",
+    "DriveUpdated",
+    "Event",
+    "FleetState",
+    "LineChanged",
+    "Measured",
+    "rfc3339",
+]
 
 _FREQUENCY = Series("output_frequency_hz", "Output frequency", "Hz")
-# Each protocol's status word, bit by bit, as its manual names the bits (for people: the
-# normalised flags beside it are what programs should use).
-_STATUS_BITS: dict[str, type[enum.IntFlag]] = {
-    "danfoss-fc": StatusWord,
-    "mitsubishi": StatusBits,
-    "enc": StateWord,
-}
 HEARTBEAT_S = 5.0  # an unchanged drive that keeps answering is published this often
 DEADBAND_PCT = 0.1  # of the nominal frequency for the output, of the reading for values
 # Fields whose every change is published (the analog ones go by the deadband).
@@ -60,96 +71,6 @@ _DISCRETE = (
     "online", "running", "fault", "warning", "direction", "at_reference", "status_word",
     "reference_pct", "alarms", "warnings",
 )  # fmt: skip
-
-
-@dataclass(slots=True, frozen=True)
-class Measured:
-    """One measured or read value, with the manual's name and the time it was read."""
-
-    value: float | str
-    unit: str
-    raw: int | None = None
-    name: str = ""  # the manual's name ("Motor Current"); "" when the codec does not know it
-    updated_at: float | None = None  # wall-clock seconds of the reply that carried it
-    # An alarm or warning word: the texts of the conditions it shows (None: not such a word)
-    texts: tuple[str, ...] | None = None
-
-    def to_json(self) -> dict[str, Any]:
-        """``{"value", "unit", "name", "updated_at"}``, and ``texts`` for a condition word."""
-        out: dict[str, Any] = {
-            "value": self.value,
-            "unit": self.unit,
-            "name": self.name,
-            "updated_at": rfc3339(self.updated_at),
-        }
-        if self.texts is not None:
-            out["texts"] = list(self.texts)
-        return out
-
-
-@dataclass(slots=True, frozen=True, kw_only=True)
-class DriveState:
-    """One drive as the gateway knows it now (DESIGN.md "Drive state")."""
-
-    name: str
-    bus: str
-    address: int
-    protocol: str
-    control: str  # "bus" | "monitor"
-    online: bool = False
-    running: bool = False
-    fault: bool = False
-    warning: bool = False
-    direction: str = "forward"
-    at_reference: bool = False
-    output_frequency_hz: float | None = None
-    # When the output frequency was read: Mitsubishi and ENC read it in an exchange of its
-    # own, so it can be older than the status beside it (never presented as newer).
-    output_frequency_updated_at: float | None = None
-    reference_pct: float | None = None  # what the master commands; None when it commands nothing
-    status_word: int | None = None
-    values: dict[str, Measured] = field(default_factory=dict)
-    alarms: tuple[Condition, ...] = ()
-    warnings: tuple[Condition, ...] = ()
-    updated_at: float | None = None  # wall-clock seconds of the last good reply
-
-    @property
-    def key(self) -> str:
-        """``bus/name``, unique in the fleet."""
-        return f"{self.bus}/{self.name}"
-
-    @property
-    def status_bits(self) -> list[str]:
-        """The names of the status word's set bits, as the protocol's manual names them."""
-        flags = _STATUS_BITS.get(self.protocol)
-        if flags is None or self.status_word is None:
-            return []
-        return [str(f.name).lower() for f in flags if f.value and self.status_word & f.value]
-
-    def to_json(self) -> dict[str, Any]:
-        """The public JSON shape shown on every surface."""
-        return {
-            "name": self.name,
-            "bus": self.bus,
-            "address": self.address,
-            "protocol": self.protocol,
-            "online": self.online,
-            "control": self.control,
-            "running": self.running,
-            "fault": self.fault,
-            "warning": self.warning,
-            "direction": self.direction,
-            "at_reference": self.at_reference,
-            "output_frequency_hz": self.output_frequency_hz,
-            "output_frequency_updated_at": rfc3339(self.output_frequency_updated_at),
-            "reference_pct": self.reference_pct,
-            "status_word": self.status_word,
-            "status_bits": self.status_bits,
-            "values": {name: m.to_json() for name, m in self.values.items()},
-            "alarms": [{"code": c.code, "text": c.text} for c in self.alarms],
-            "warnings": [{"code": c.code, "text": c.text} for c in self.warnings],
-            "updated_at": rfc3339(self.updated_at),
-        }
 
 
 _FIELDS = tuple(f.name for f in dataclasses.fields(DriveState))
@@ -199,13 +120,6 @@ def _monitored(line: LinePlan, drive: DrivePlan) -> frozenset[str] | None:
     except FcmasterError:  # a plan the config would refuse; show what comes
         return None
     return frozenset(k.name for k in keys + words)
-
-
-def rfc3339(wall: float | None) -> str | None:
-    """Wall-clock seconds as RFC 3339 UTC with milliseconds, e.g. 2026-11-22T08:00:00.123Z."""
-    if wall is None:
-        return None
-    return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")[:-6] + "Z"
 
 
 # -- events --------------------------------------------------------------------------------
