@@ -7,7 +7,8 @@ matching subscription and returns; no subscriber code runs there. A subscription
 things, and its memory is bounded whatever the subscriber does:
 
 * the latest :class:`~fcmaster.state.DriveUpdated` per drive — a newer snapshot replaces an
-  undelivered older one in place (conflation: at most one pending snapshot per drive);
+  undelivered older one in place (conflation: at most one pending snapshot per drive),
+  keeping the names of the fields both changed;
 * discrete events (alarms, availability, command results, line changes) in order, up to
   ``max_events``; past that the oldest is dropped and counted, and the subscriber is told
   with an :class:`EventsDropped` before the next event it receives.
@@ -75,7 +76,10 @@ class Subscription:
         if isinstance(event, DriveUpdated):
             key = event.state.key
             pending = self._latest.get(key)
-            self._latest[key] = (self._seq if pending is None else pending[0], event)
+            if pending is None:
+                self._latest[key] = (self._seq, event)
+            else:
+                self._latest[key] = (pending[0], event.after(pending[1]))
         else:
             if len(self._events) >= self._max_events:
                 self._events.popleft()

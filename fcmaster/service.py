@@ -42,7 +42,7 @@ from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import Config
 from fcmaster.hub import Hub
-from fcmaster.state import FleetState, LineChanged
+from fcmaster.state import FleetState
 
 log = structlog.get_logger("fcmaster.service")
 
@@ -240,9 +240,7 @@ class Service:
             await self.clock.sleep(STATS_INTERVAL_S)
             now = self.clock.now()
             for name, master in self.masters.items():
-                self.hub.publish(
-                    LineChanged(bus=name, up=master.is_up, stats=master.stats.to_json(now))
-                )
+                self.fleet.line_sampled(name, master.is_up, master.stats.to_json(now))
 
 
 def _adapter_json(port: SerialTransport | None) -> dict[str, Any] | None:

@@ -12,90 +12,114 @@ fields, which mean the same for every protocol.
 Alarms and warnings arrive per source word (FC: 16-90 and 16-91 are both alarms); the
 snapshot shows their union, and a change makes one ``ConditionChanged`` per code raised or
 cleared, so consumers never diff lists themselves.
+
+Every reading keeps the time it was taken: ``updated_at`` (the last good reply),
+``output_frequency_updated_at`` and each value's ``updated_at`` — Mitsubishi and ENC read
+the frequency in an exchange of its own, so it may be older than the status beside it.
+
+Only a change a subscriber can see is *published* as a ``DriveUpdated``: a status bit, the
+status word, alarms, warnings, online, the commanded reference, the set of values, or the
+output frequency or a value moving beyond its deadband since the state last published — so
+slow drifts add up and go out once they cross it. A drive that keeps answering unchanged is
+published again every ``heartbeat_s``, with its fresh times.
+
+On a steady fleet most replies change nothing but times. Such a reply builds no snapshot:
+its times wait in a small mutable record (``_Fresh``) and are folded into a new snapshot
+when someone reads the drive (``get``, ``find``, ``snapshot``) or the heartbeat is due, so
+readers still see the time of the last reply.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import operator
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from dataclasses import dataclass
 from typing import Any
 
+from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.clock import Clock
+from fcmaster.drive_state import DriveState, Measured, rfc3339
+from fcmaster.errors import FcmasterError
+from fcmaster.history import History, Series
 from fcmaster.protocol.codec import Condition, Reply
 from fcmaster.protocol.drive import ControlIntent
 
+__all__ = [  # the snapshot's names are re-exported: readers import them from here
+    "DEADBAND_PCT",
+    "HEARTBEAT_S",
+    "AvailabilityChanged",
+    "CommandCompleted",
+    "ConditionChanged",
+    "DriveState",
+    "DriveUpdated",
+    "Event",
+    "FleetState",
+    "LineChanged",
+    "Measured",
+    "rfc3339",
+]
 
-@dataclass(slots=True, frozen=True)
-class Measured:
-    """One measured or read value."""
-
-    value: float | str
-    unit: str
-    raw: int | None = None
-
-
-@dataclass(slots=True, frozen=True, kw_only=True)
-class DriveState:
-    """One drive as the gateway knows it now (DESIGN.md "Drive state")."""
-
-    name: str
-    bus: str
-    address: int
-    protocol: str
-    control: str  # "bus" | "monitor"
-    online: bool = False
-    running: bool = False
-    fault: bool = False
-    warning: bool = False
-    direction: str = "forward"
-    at_reference: bool = False
-    output_frequency_hz: float | None = None
-    reference_pct: float | None = None  # what the master commands; None when it commands nothing
-    status_word: int | None = None
-    values: dict[str, Measured] = field(default_factory=dict)
-    alarms: tuple[Condition, ...] = ()
-    warnings: tuple[Condition, ...] = ()
-    updated_at: float | None = None  # wall-clock seconds of the last good reply
-
-    @property
-    def key(self) -> str:
-        """``bus/name``, unique in the fleet."""
-        return f"{self.bus}/{self.name}"
-
-    def to_json(self) -> dict[str, Any]:
-        """The public JSON shape shown on every surface."""
-        return {
-            "name": self.name,
-            "bus": self.bus,
-            "address": self.address,
-            "protocol": self.protocol,
-            "online": self.online,
-            "control": self.control,
-            "running": self.running,
-            "fault": self.fault,
-            "warning": self.warning,
-            "direction": self.direction,
-            "at_reference": self.at_reference,
-            "output_frequency_hz": self.output_frequency_hz,
-            "reference_pct": self.reference_pct,
-            "status_word": self.status_word,
-            "values": {name: {"value": m.value, "unit": m.unit} for name, m in self.values.items()},
-            "alarms": [{"code": c.code, "text": c.text} for c in self.alarms],
-            "warnings": [{"code": c.code, "text": c.text} for c in self.warnings],
-            "updated_at": rfc3339(self.updated_at),
-        }
+_FREQUENCY = Series("output_frequency_hz", "Output frequency", "Hz")
+HEARTBEAT_S = 5.0  # an unchanged drive that keeps answering is published this often
+DEADBAND_PCT = 0.1  # of the nominal frequency for the output, of the reading for values
+# Fields whose every change is published (the analog ones go by the deadband).
+_DISCRETE = (
+    "online", "running", "fault", "warning", "direction", "at_reference", "status_word",
+    "reference_pct", "alarms", "warnings",
+)  # fmt: skip
 
 
-def rfc3339(wall: float | None) -> str | None:
-    """Wall-clock seconds as RFC 3339 UTC with milliseconds, e.g. 2026-11-22T08:00:00.123Z."""
-    if wall is None:
+_FIELDS = tuple(f.name for f in dataclasses.fields(DriveState))
+_fields_of = operator.attrgetter(*_FIELDS)
+_discrete = operator.attrgetter(*_DISCRETE)
+
+
+def _replace(state: DriveState, changes: dict[str, Any]) -> DriveState:
+    """``dataclasses.replace`` for a drive state, at a third of its cost (every reply pays it)."""
+    fields = dict(zip(_FIELDS, _fields_of(state), strict=True))
+    fields.update(changes)
+    return DriveState(**fields)
+
+
+class _Fresh:
+    """The reading times of replies that changed nothing, kept until the snapshot is read."""
+
+    __slots__ = ("frequency_at", "updated_at", "values_at")
+
+    def __init__(self, updated_at: float) -> None:
+        self.updated_at = updated_at
+        self.frequency_at: float | None = None
+        self.values_at: dict[str, float] = {}
+
+
+def _same_reading(old: Measured | None, new: Measured) -> bool:
+    """Whether ``new`` reads exactly what ``old`` did (its time aside)."""
+    return (
+        old is not None
+        and old.value == new.value
+        and old.unit == new.unit
+        and old.texts == new.texts
+        and old.name == new.name
+    )
+
+
+def _monitored(line: LinePlan, drive: DrivePlan) -> frozenset[str] | None:
+    """The parameter names ``drive``'s values show (None: any, when the codec cannot say)."""
+    try:
+        codec = codec_for(line)
+        keys = (
+            codec.default_monitor()
+            if drive.monitor is None
+            else tuple(codec.parameter(p) for p in drive.monitor)
+        )
+        words = codec.condition_parameters(alarms=True, warnings=True)
+    except FcmasterError:  # a plan the config would refuse; show what comes
         return None
-    return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")[:-6] + "Z"
+    return frozenset(k.name for k in keys + words)
 
 
 # -- events --------------------------------------------------------------------------------
@@ -103,9 +127,20 @@ def rfc3339(wall: float | None) -> str | None:
 
 @dataclass(slots=True, frozen=True)
 class DriveUpdated:
-    """A drive's snapshot changed (conflated for slow subscribers: latest wins)."""
+    """A drive's snapshot changed (conflated for slow subscribers: latest wins).
+
+    ``changed`` names the public fields that changed since the drive was last published
+    (``values`` for any value); it is empty for a heartbeat.
+    """
 
     state: DriveState
+    changed: tuple[str, ...] = ()
+
+    def after(self, earlier: DriveUpdated) -> DriveUpdated:
+        """This update standing in for ``earlier`` too (conflation): the changes of both."""
+        if not earlier.changed:
+            return self
+        return DriveUpdated(self.state, tuple(dict.fromkeys(earlier.changed + self.changed)))
 
     @property
     def bus(self) -> str:
@@ -177,13 +212,24 @@ class FleetState:
         emit: Callable[[Event], None],
         clock: Clock,
         wall: Callable[[], float] = time.time,
+        heartbeat_s: float = HEARTBEAT_S,
+        deadband_pct: float = DEADBAND_PCT,
     ) -> None:
-        self._emit = emit
+        self._publish_event = emit
         self._clock = clock
         self._wall = wall
+        self._heartbeat_s = heartbeat_s
+        self._band = deadband_pct / 100.0
+        self.history = History()  # what was published, for charts opened later
         self._states: dict[str, DriveState] = {}
+        self._fresh: dict[str, _Fresh] = {}  # times of unchanged replies not yet in _states
+        self._charted: dict[str, dict[str, Series]] = {}  # what each drive's history holds
+        # what each drive's subscribers last saw, and when (monotonic)
+        self._published: dict[str, tuple[DriveState, float]] = {}
         self._plans: dict[str, DrivePlan] = {}
         self._sources: dict[str, dict[tuple[str, str], tuple[Condition, ...]]] = {}
+        # the parameters each drive's values show: its monitor list and condition words
+        self._monitored: dict[str, frozenset[str] | None] = {}
         for line in lines:
             for drive in line.drives:
                 state = DriveState(
@@ -194,23 +240,50 @@ class FleetState:
                     control="bus" if drive.control else "monitor",
                 )
                 self._states[state.key] = state
+                self._published[state.key] = (state, float("-inf"))
+                self._charted[state.key] = {_FREQUENCY.key: _FREQUENCY}
                 self._plans[state.key] = drive
                 self._sources[state.key] = {}
+                self._monitored[state.key] = _monitored(line, drive)
+
+    def _emit(self, event: Event) -> None:
+        """Publish ``event``; a drive's discrete events are also kept in its history."""
+        if isinstance(event, ConditionChanged | AvailabilityChanged | CommandCompleted):
+            self.history.record_event(f"{event.bus}/{event.drive}", self._wall(), event)
+        self._publish_event(event)
 
     def snapshot(self) -> list[DriveState]:
         """Every drive, in configuration order."""
-        return list(self._states.values())
+        return [self._current(key) for key in self._states]
 
     def get(self, bus: str, name: str) -> DriveState | None:
         """One drive's snapshot."""
-        return self._states.get(f"{bus}/{name}")
+        key = f"{bus}/{name}"
+        return self._current(key) if key in self._states else None
 
     def find(self, name: str) -> DriveState | None:
         """A drive by name alone (names are unique across the fleet)."""
-        for state in self._states.values():
+        for key, state in self._states.items():
             if state.name == name:
-                return state
+                return self._current(key)
         return None
+
+    def _current(self, key: str) -> DriveState:
+        """The drive's snapshot with the times of the unchanged replies since it was built."""
+        fresh = self._fresh.pop(key, None)
+        state = self._states[key]
+        if fresh is None:
+            return state
+        changes: dict[str, Any] = {"updated_at": fresh.updated_at}
+        if fresh.frequency_at is not None:
+            changes["output_frequency_updated_at"] = fresh.frequency_at
+        if fresh.values_at:
+            values = dict(state.values)
+            for name, read_at in fresh.values_at.items():
+                values[name] = dataclasses.replace(values[name], updated_at=read_at)
+            changes["values"] = values
+        state = self._states[key] = _replace(state, changes)
+        return state
 
     # -- BusObserver ---------------------------------------------------------------------
 
@@ -219,10 +292,10 @@ class FleetState:
     ) -> None:
         """Fold one reply into the drive's snapshot."""
         key = f"{bus}/{drive.name}"
-        old = self._states[key]
+        read_at = self._wall() - (self._clock.now() - at)
+        old = self._states[key]  # its times may lag (see _current): only its content is used
         changes: dict[str, Any] = {
             "online": True,
-            "updated_at": self._wall() - (self._clock.now() - at),
             "reference_pct": None if commanded is None else commanded.reference_pct,
         }
         status = reply.status
@@ -244,21 +317,114 @@ class FleetState:
             changes["output_frequency_hz"] = round(
                 abs(reply.output_pct) * drive.nominal_frequency_hz / 100.0, 3
             )
-        if reply.value is not None:
-            value = reply.value
-            name = value.parameter.name
+        value, read, measured = reply.value, None, None
+        monitored = self._monitored[key]
+        if value is not None and (monitored is None or value.parameter.name in monitored):
+            # A one-off read of anything else is its caller's answer, not a monitored value.
+            read = value.parameter.name
             if value.index:
-                name = f"{name}[{value.index}]"
-            values = dict(old.values)
-            values[name] = Measured(value.value, value.unit, value.raw)
-            changes["values"] = values
-        if reply.conditions is not None:
+                read = f"{read}[{value.index}]"
+            texts = None
+            report = reply.conditions
+            if report is not None and report.source == value.parameter.name:
+                texts = tuple(c.text for c in report.active)  # an alarm or warning word
+            measured = Measured(value.value, value.unit, value.raw, value.title, read_at, texts)
+        report = reply.conditions
+        if (
+            all(getattr(old, field) == given for field, given in changes.items())
+            and (measured is None or _same_reading(old.values.get(read or ""), measured))
+            and (
+                report is None
+                or self._sources[key].get((report.kind, report.source)) == report.active
+            )
+        ):
+            # Nothing but the times: no new snapshot, no event, until someone reads it or the
+            # heartbeat is due.
+            self._refresh(key, read_at, "output_frequency_hz" in changes, read)
+            if self._clock.now() - self._published[key][1] >= self._heartbeat_s:
+                self._publish(key, self._current(key), drive.nominal_frequency_hz)
+            return
+        old = self._current(key)
+        changes["updated_at"] = read_at
+        if "output_frequency_hz" in changes:
+            changes["output_frequency_updated_at"] = read_at
+        if measured is not None and read is not None:
+            changes["values"] = {**old.values, read: measured}
+        if report is not None:
             self._conditions(key, old, reply, changes)
-        new = dataclasses.replace(old, **changes)
+        new = _replace(old, changes)
         self._states[key] = new
         if not old.online:
             self._emit(AvailabilityChanged(bus=new.bus, drive=new.name, online=True))
-        self._emit(DriveUpdated(new))
+        self._publish(key, new, drive.nominal_frequency_hz, read)
+
+    def _refresh(self, key: str, read_at: float, frequency: bool, value: str | None) -> None:
+        fresh = self._fresh.get(key)
+        if fresh is None:
+            fresh = self._fresh[key] = _Fresh(read_at)
+        fresh.updated_at = read_at
+        if frequency:
+            fresh.frequency_at = read_at
+        if value is not None:
+            fresh.values_at[value] = read_at
+
+    def _publish(
+        self, key: str, new: DriveState, nominal_frequency_hz: float, read: str | None = None
+    ) -> None:
+        """Emit ``new`` if a subscriber could see a change, or the heartbeat is due."""
+        sent, sent_at = self._published[key]
+        changed = self._changes(sent, new, nominal_frequency_hz, read)
+        now = self._clock.now()
+        if changed or now - sent_at >= self._heartbeat_s:
+            self._published[key] = (new, now)
+            self._emit(DriveUpdated(new, changed))
+            self._record(key, new)
+
+    def _record(self, key: str, state: DriveState) -> None:
+        online = state.online
+        values: dict[str, float | None] = {
+            _FREQUENCY.key: state.output_frequency_hz if online else None
+        }
+        charted = self._charted[key]
+        for name, measured in state.values.items():
+            if measured.texts is None and not isinstance(measured.value, str):
+                values[name] = measured.value if online else None
+                if name not in charted:
+                    charted[name] = Series(name, measured.name or name, measured.unit)
+        at = state.updated_at if online and state.updated_at is not None else self._wall()
+        self.history.record_drive(key, at, values, charted)
+
+    def _changes(
+        self, sent: DriveState, new: DriveState, nominal_frequency_hz: float, read: str | None
+    ) -> tuple[str, ...]:
+        """The public fields in which ``new`` differs visibly from the state last ``sent``.
+
+        ``read`` is the value the reply that made ``new`` carried, if any.
+        """
+        changed: list[str] = []
+        if _discrete(sent) != _discrete(new):  # one C call each: the common case is equal
+            changed = [name for name in _DISCRETE if getattr(sent, name) != getattr(new, name)]
+        band = self._band
+        old_hz, new_hz = sent.output_frequency_hz, new.output_frequency_hz
+        if (old_hz is None) != (new_hz is None) or (
+            old_hz is not None
+            and new_hz is not None
+            and abs(new_hz - old_hz) > band * abs(nominal_frequency_hz)
+        ):
+            changed.append("output_frequency_hz")
+        if sent.values.keys() != new.values.keys():
+            changed.append("values")
+        elif read is not None:
+            # Only the value this reply read can have moved since the last publication: any
+            # other was within the band when it was read, or it would have been published.
+            old, value = sent.values[read].value, new.values[read].value
+            if isinstance(old, str) or isinstance(value, str):
+                moved = old != value
+            else:
+                moved = abs(value - old) > band * max(abs(value), abs(old))
+            if moved:
+                changed.append("values")
+        return tuple(changed)
 
     def _conditions(self, key: str, old: DriveState, reply: Reply, changes: dict[str, Any]) -> None:
         report = reply.conditions
@@ -298,17 +464,22 @@ class FleetState:
     def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
         """Mark a drive online or offline; its last values stay, with their time."""
         key = f"{bus}/{drive.name}"
-        old = self._states[key]
+        old = self._current(key)
         if old.online == online:
             return
         new = dataclasses.replace(old, online=online)
         self._states[key] = new
         self._emit(AvailabilityChanged(bus=new.bus, drive=new.name, online=online))
-        self._emit(DriveUpdated(new))
+        self._publish(key, new, drive.nominal_frequency_hz)
 
     def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
         """A line opened or was lost."""
         self._emit(LineChanged(bus=bus, up=up, reason=reason))
+
+    def line_sampled(self, bus: str, up: bool, stats: dict[str, Any]) -> None:
+        """A line's statistics were sampled: kept in its history and published."""
+        self.history.record_line(bus, self._wall(), stats)
+        self._emit(LineChanged(bus=bus, up=up, stats=stats))
 
     def command_completed(
         self, bus: str, drive: str, command: Command, result: CommandResult

@@ -31,6 +31,7 @@ from fcmaster.adapters import metrics
 from fcmaster.adapters.auth import Authenticator, AuthError, Principal, Role
 from fcmaster.adapters.commands import parse_command
 from fcmaster.adapters.gateway import Gateway
+from fcmaster.adapters.messages import event_json
 from fcmaster.adapters.middleware import (
     BodyLimit,
     SecurityHeaders,
@@ -51,6 +52,7 @@ from fcmaster.adapters.schemas import (
 from fcmaster.adapters.stream import StreamRegistry, serve_stream
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.errors import UsageError
+from fcmaster.state import AvailabilityChanged, CommandCompleted, ConditionChanged, rfc3339
 
 log = structlog.get_logger("fcmaster.adapters.http")
 
@@ -247,6 +249,31 @@ def create_app(
     async def buses(_: Viewer) -> Response:
         """Every line with its statistics (histogram buckets end at ``le: "+Inf"``)."""
         return json_response([line.to_json() for line in gateway.lines()])
+
+    @app.get("/api/v1/drives/{name}/history", responses={**_AUTH_ERRORS, 404: _DRIVE_ERRORS[404]})
+    async def drive_history(name: str, _: Viewer) -> Response:
+        """The drive's last 15 minutes: samples as columns, and its recent events.
+
+        ``t`` and one ``data`` list per series, the shape charts take; ``events`` are stream
+        messages (alarms, availability, commands) with their time ``at``.
+        """
+        state = gateway.fleet.find(name)
+        if state is None:
+            raise HTTPException(404, f"no drive called {name!r}")
+        history = gateway.fleet.history
+        events = [
+            {"at": rfc3339(at), **event_json(event)}
+            for at, event in history.events(state.key)
+            if isinstance(event, ConditionChanged | AvailabilityChanged | CommandCompleted)
+        ]
+        return json_response({"drive": name, **history.drive(state.key), "events": events})
+
+    @app.get("/api/v1/buses/{name}/history", responses={**_AUTH_ERRORS, 404: _DRIVE_ERRORS[404]})
+    async def bus_history(name: str, _: Viewer) -> Response:
+        """The line's recent rates (15 min): requests, replies, timeouts, errors per second."""
+        if all(line.name != name for line in gateway.lines()):
+            raise HTTPException(404, f"no line called {name!r}")
+        return json_response({"bus": name, **gateway.fleet.history.line(name)})
 
     @app.get("/api/v1/whoami", response_model=PrincipalOut, responses=_AUTH_ERRORS)
     async def whoami(principal: Viewer) -> Response:

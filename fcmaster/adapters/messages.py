@@ -5,7 +5,8 @@ told apart by ``type``:
 
 ==============  ===========================================================================
 ``snapshot``    first message: ``drives`` (every drive state) and ``buses`` (every line)
-``drive``       ``drive``: one drive's new state (conflated for slow clients: latest wins)
+``drive``       ``drive``: one drive's new state (conflated for slow clients: latest wins),
+                ``changed``: the fields that changed since its last message ([]: heartbeat)
 ``condition``   ``bus``, ``drive``, ``kind`` (alarm/warning), ``code``, ``text``, ``active``
 ``availability``  ``bus``, ``drive``, ``online``
 ``command``     ``bus``, ``drive``, ``command`` (action, actor, …) and ``result``
@@ -66,8 +67,8 @@ def command_json(command: Command) -> dict[str, Any]:
 def event_json(event: Event | EventsDropped) -> dict[str, Any]:
     """One event as its stream message (see the module docstring)."""
     match event:
-        case DriveUpdated(state=state):
-            return {"type": "drive", "drive": state.to_json()}
+        case DriveUpdated(state=state, changed=changed):
+            return {"type": "drive", "drive": state.to_json(), "changed": list(changed)}
         case ConditionChanged():
             return {
                 "type": "condition",

@@ -10,6 +10,7 @@ Drive gauges (labels ``bus``, ``drive``):
 ``fcmaster_drive_online``, ``_running``, ``_fault``, ``_warning``, ``_at_reference``
 (0/1), ``fcmaster_drive_output_frequency_hz``, ``fcmaster_drive_reference_ratio``,
 ``fcmaster_drive_status_word``, ``fcmaster_drive_last_reply_timestamp_seconds``,
+``fcmaster_drive_output_frequency_timestamp_seconds``,
 ``fcmaster_drive_value`` (every numeric measured value, labels ``param`` as the manual
 writes it and ``unit``), ``fcmaster_drive_alarms`` and ``fcmaster_drive_warnings`` (how
 many are active), ``fcmaster_drive_alarm_active`` and ``fcmaster_drive_warning_active``
@@ -164,6 +165,15 @@ def _drive(x: Exposition, state: DriveState) -> None:
             "gauge",
             "Output frequency.",
             state.output_frequency_hz,
+            base,
+        )
+    if state.output_frequency_updated_at is not None:
+        x.add(
+            "fcmaster_drive_output_frequency_timestamp_seconds",
+            "gauge",
+            "Unix time the output frequency was read (older than the last reply when the "
+            "protocol reads it in an exchange of its own).",
+            state.output_frequency_updated_at,
             base,
         )
     if state.reference_pct is not None:

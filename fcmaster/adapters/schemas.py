@@ -97,6 +97,8 @@ class ValueOut(BaseModel):
 
     value: float | str
     unit: str
+    name: str = Field(description='the manual\'s name, e.g. "Motor Current" ("" if unknown)')
+    updated_at: str | None = Field(description="RFC 3339 UTC time this value was read")
 
 
 class ConditionOut(BaseModel):
@@ -121,8 +123,14 @@ class DriveOut(BaseModel):
     direction: Literal["forward", "reverse"]
     at_reference: bool
     output_frequency_hz: float | None
+    output_frequency_updated_at: str | None = Field(
+        description="RFC 3339 UTC time the output frequency was read (may precede updated_at)"
+    )
     reference_pct: float | None
     status_word: int | None
+    status_bits: list[str] = Field(
+        description="the status word's set bits, named as the protocol's manual names them"
+    )
     values: dict[str, ValueOut]
     alarms: list[ConditionOut]
     warnings: list[ConditionOut]

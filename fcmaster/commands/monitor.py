@@ -110,6 +110,12 @@ def _age(updated_at: str | None, now: float) -> str:
     return f"{max(0.0, seconds):.0f}s" if seconds < 100 else f"{seconds / 60:.0f}m"
 
 
+def _oldest_reading(drive: dict[str, Any]) -> str | None:
+    """The age the row shows: its frequency's reading when that is older than the status."""
+    times = [t for t in (drive.get("updated_at"), drive.get("output_frequency_updated_at")) if t]
+    return min(times) if times else None  # RFC 3339 UTC with ms: text order is time order
+
+
 def _number(value: Any, digits: int) -> str:
     return "–" if not isinstance(value, int | float) else f"{value:.{digits}f}"
 
@@ -145,7 +151,7 @@ def render_table(fleet: Fleet, *, width: int = 120, color: bool = False, now: fl
         row = (
             f"{drive['name']:<{name_w}}  {drive.get('bus', ''):<8.8} {drive.get('address', ''):>3}"
             f"  {state:<16} {_number(drive.get('output_frequency_hz'), 2):>7}"
-            f" {_number(drive.get('reference_pct'), 1):>6} {_age(drive.get('updated_at'), now):>4}"
+            f" {_number(drive.get('reference_pct'), 1):>6} {_age(_oldest_reading(drive), now):>4}"
             f"  {'; '.join(conditions)}"
         )
         lines.append(_paint(row[:width], tint, enabled=color))

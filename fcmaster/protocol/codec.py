@@ -11,7 +11,7 @@ instruction a poll reads — stays behind this seam, in the protocol package.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 from fcmaster.protocol.drive import ControlIntent
@@ -98,6 +98,9 @@ class ParameterValue:
     raw: int | None  # None for text
     value: float | str
     unit: str
+    # The manual's name ("Motor Current"), "" when the codec's table lacks the parameter.
+    # It follows from ``parameter``, so it takes no part in equality.
+    title: str = field(default="", compare=False)
 
 
 @dataclass(slots=True, frozen=True)

@@ -31,6 +31,8 @@ PUMP = DrivePlan(
     name="pump-1", address=1, control=True, nominal_frequency_hz=50.0, max_frequency_hz=50.0
 )
 FAN = DrivePlan(name="fan-1", address=2)
+# The manual's names of the FC parameters these tests use, as the codec's table gives them.
+FC_NAMES = {"16-14": "Motor Current", "16-30": "DC Link Voltage", "16-12": "Motor Voltage"}
 LINE = LinePlan(name="line1", port="sim://line1", drives=(PUMP, FAN))
 
 Respond = Callable[[str, Command], CommandResult | Awaitable[CommandResult]]
@@ -118,7 +120,12 @@ class FakeGateway:
             param, number, unit = value
             raw = int(number * 10) if isinstance(number, float) else None
             parameter_value = ParameterValue(
-                parameter=ParameterKey(param, 0), index=0, raw=raw, value=number, unit=unit
+                parameter=ParameterKey(param, 0),
+                index=0,
+                raw=raw,
+                value=number,
+                unit=unit,
+                title=FC_NAMES.get(param, ""),
             )
         reference = (hz or 0.0) / plan.nominal_frequency_hz * 100.0 if running else 0.0
         intent = ControlIntent(reference_pct=round(reference, 1)) if plan.control else None

@@ -55,7 +55,11 @@ async def test_status_shows_one_drive_decoded() -> None:
     assert state["protocol"] == "enc"
     assert state["running"] is True
     assert state["output_frequency_hz"] == 20.0
-    assert state["values"]["11/0000"] == {"value": 20.0, "unit": "Hz"}  # set frequency
+    assert {k: v for k, v in state["values"]["11/0000"].items() if k != "updated_at"} == {
+        "value": 20.0,
+        "unit": "Hz",
+        "name": "Current set frequency",
+    }  # set frequency
     assert state["alarms"] == []
 
 

@@ -31,8 +31,10 @@ DRIVE_KEYS = {
     "direction",
     "at_reference",
     "output_frequency_hz",
+    "output_frequency_updated_at",
     "reference_pct",
     "status_word",
+    "status_bits",
     "values",
     "alarms",
     "warnings",
@@ -65,7 +67,14 @@ async def test_drives_lists_every_drive_state_in_configuration_order(
     assert set(drives[0]) == DRIVE_KEYS
     assert drives[0]["running"] is True
     assert drives[0]["output_frequency_hz"] == 42.5
-    assert drives[0]["values"] == {"16-14": {"value": 5.25, "unit": "A"}}
+    (current,) = drives[0]["values"].items()
+    assert current[0] == "16-14"
+    assert (current[1]["value"], current[1]["unit"], current[1]["name"]) == (
+        5.25,
+        "A",
+        "Motor Current",
+    )
+    assert current[1]["updated_at"] == drives[0]["updated_at"]
     assert drives[0]["updated_at"].endswith("Z")
     assert drives[1]["online"] is False
 
@@ -101,6 +110,39 @@ async def test_buses_show_statistics_with_histograms_in_strict_json(
     assert (line["name"], line["up"], line["drives"]) == ("line1", True, ["pump-1", "fan-1"])
     assert line["stats"]["timeouts"] == 1
     assert line["stats"]["latency_s"]["buckets"][-1] == {"le": "+Inf", "count": 1}
+
+
+async def test_a_drive_s_history_comes_as_columns_with_names_and_units(
+    gateway: FakeGateway, client: httpx.AsyncClient
+) -> None:
+    gateway.reply("pump-1", running=True, hz=42.5, value=("16-14", 5.25, "A"))
+    response = await client.get("/api/v1/drives/pump-1/history", headers=VIEWER)
+    assert response.status_code == 200
+    history = response.json()
+    assert (history["drive"], history["window_s"], len(history["t"])) == ("pump-1", 900.0, 1)
+    assert [(s["key"], s["name"], s["unit"], s["data"]) for s in history["series"]] == [
+        ("output_frequency_hz", "Output frequency", "Hz", [42.5]),
+        ("16-14", "Motor Current", "A", [5.25]),
+    ]
+    assert [(e["type"], e["online"]) for e in history["events"]] == [("availability", True)]
+    assert history["events"][0]["at"].endswith("Z")
+    missing = await client.get("/api/v1/drives/nope/history", headers=VIEWER)
+    assert missing.status_code == 404
+    assert (await client.get("/api/v1/drives/pump-1/history")).status_code == 401
+
+
+async def test_a_line_s_history_has_its_rates(
+    gateway: FakeGateway, client: httpx.AsyncClient
+) -> None:
+    stats = gateway.lines()[0].stats
+    gateway.fleet.line_sampled("line1", True, {**stats, "requests": 0})
+    gateway.fleet.line_sampled("line1", True, {**stats, "requests": 10})
+    response = await client.get("/api/v1/buses/line1/history", headers=VIEWER)
+    assert response.status_code == 200
+    history = response.json()
+    assert len(history["t"]) == 1
+    assert history["series"]["requests_per_s"][0] > 0
+    assert (await client.get("/api/v1/buses/nope/history", headers=VIEWER)).status_code == 404
 
 
 async def test_whoami_names_the_token_and_its_role(client: httpx.AsyncClient) -> None:

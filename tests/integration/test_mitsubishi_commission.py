@@ -55,7 +55,11 @@ async def test_status_shows_one_drive_decoded() -> None:
     assert state["protocol"] == "mitsubishi"
     assert (state["running"], state["fault"], state["direction"]) == (True, False, "forward")
     assert state["output_frequency_hz"] == 20.0
-    assert state["values"]["H6F"] == {"value": 20.0, "unit": "Hz"}
+    assert {k: v for k, v in state["values"]["H6F"].items() if k != "updated_at"} == {
+        "value": 20.0,
+        "unit": "Hz",
+        "name": "output frequency",
+    }
     assert state["values"]["H71"]["unit"] == "V"
     assert state["alarms"] == []
 

@@ -18,7 +18,8 @@ from tests.integration.mqtt_gateway import FakeGateway
 LIMIT_S = 20.0
 STATE_KEYS = {
     "name", "bus", "address", "protocol", "online", "control", "running", "fault", "warning",
-    "direction", "at_reference", "output_frequency_hz", "reference_pct", "status_word",
+    "direction", "at_reference", "output_frequency_hz", "output_frequency_updated_at",
+    "reference_pct", "status_word", "status_bits",
     "values", "alarms", "warnings", "updated_at",
 }  # fmt: skip
 SIM_CONFIG = """

@@ -41,6 +41,17 @@ def test_snapshots_of_one_drive_conflate_to_the_latest() -> None:
     assert sub.get_nowait() is None
 
 
+def test_a_conflated_snapshot_names_every_change_it_stands_for() -> None:
+    hub = Hub()
+    sub = hub.subscribe()
+    hub.publish(DriveUpdated(_state("pump-1", hz=10.0), ("running", "output_frequency_hz")))
+    hub.publish(DriveUpdated(_state("pump-1", hz=10.0), ("alarms",)))
+    hub.publish(DriveUpdated(_state("pump-1", hz=10.0)))  # a heartbeat
+    item = sub.get_nowait()
+    assert isinstance(item, DriveUpdated)
+    assert item.changed == ("running", "output_frequency_hz", "alarms")
+
+
 def test_delivery_keeps_arrival_order_between_snapshots_and_events() -> None:
     hub = Hub()
     sub = hub.subscribe()

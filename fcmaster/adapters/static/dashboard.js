@@ -1,20 +1,35 @@
 // fcmaster dashboard: a live view of the fleet over /api/v1/stream, no build step.
-// Everything text-like goes in through textContent, never innerHTML: drive names and
-// alarm texts come from the plant.
+//
+// Rows are built once per drive and then updated in place: a message changes the text of
+// the cells whose content changed, and never replaces a row, a button or an input. A
+// button pressed for a human 150 ms keeps its click, and the Hz field keeps its text and
+// its caret while the line is busy. Everything text-like goes in through textContent,
+// never innerHTML: drive names and alarm texts come from the plant.
+//
+// Views: the fleet (#), one drive (#drive=NAME) and one line (#line=NAME), switched by the
+// address's fragment; #token=… hands the page a token (taken out of the address at once).
 "use strict";
 
-const TREND_POINTS = 240;      // samples kept per drive (about two minutes)
-const TREND_STEP_MS = 500;     // at most one sample per drive per half second
 const EVENTS_KEPT = 100;
+const DRIVE_EVENTS_KEPT = 30;
+const STALE_AFTER_S = 15;      // the daemon repeats a steady drive every 5 s
+const OLD_FREQUENCY_S = 2;     // a frequency read this much before the status is marked
+const WINDOW_S = 15 * 60;      // what the charts show
 
-const fleet = { drives: new Map(), buses: new Map(), trends: new Map() };
+const fleet = { drives: new Map(), buses: new Map() };
+const rows = new Map();        // drive name -> its row and the text each cell shows
+const cards = new Map();       // line name -> its card
+const driveEvents = new Map(); // drive name -> recent event texts
 let token = sessionStorage.getItem("fcmaster.token");
 let role = null;
 let socket = null;
 let retryMs = 500;
+let retryTimer = 0;
 const dirty = new Set();
 let linesDirty = false;
 let frame = 0;
+let view = { kind: "fleet" };
+let detail = null;            // the open drive or line view: its charts and data
 
 const $ = (id) => document.getElementById(id);
 
@@ -30,20 +45,36 @@ function el(tag, props = {}, ...children) {
   return node;
 }
 
+// Set a node's text only when it differs, so the DOM is not touched for nothing.
+function put(node, text) {
+  if (node.textContent !== text) node.textContent = text;
+}
+
 function fmt(value, digits = 1) {
   if (value === null || value === undefined) return "–";
   if (typeof value !== "number") return String(value);
   return value.toFixed(digits);
 }
 
+function fmtValue(value) {
+  if (typeof value !== "number") return fmt(value);
+  if (Number.isInteger(value) && Math.abs(value) >= 1000) return String(value);
+  const size = Math.abs(value);
+  return value.toFixed(size >= 1000 ? 0 : size >= 100 ? 1 : 2);
+}
+
+const seconds = (rfc3339) => (rfc3339 ? Date.parse(rfc3339) / 1000 : null);
+const clock = (s) => new Date(s * 1000).toLocaleTimeString();
+
 // -- authentication -------------------------------------------------------------------
 
 function takeTokenFromFragment() {
   const match = location.hash.match(/^#token=(.+)$/);
-  if (!match) return;
+  if (!match) return false;
   token = decodeURIComponent(match[1]);
   sessionStorage.setItem("fcmaster.token", token);
   history.replaceState(null, "", location.pathname + location.search);
+  return true;
 }
 
 async function api(path, options = {}) {
@@ -56,17 +87,27 @@ async function api(path, options = {}) {
 async function identify() {
   const response = await api("/api/v1/whoami");
   if (response.status === 401) {
-    role = null;
+    setRole(null);
     $("identity").textContent = "not signed in";
-    showNotice("This dashboard needs a token: use the Token… button.");
-    return false;
+    showNotice(token
+      ? "The daemon does not accept this token: it is wrong or no longer configured. " +
+        "Enter another with the Token… button."
+      : "This dashboard needs a token: use the Token… button.");
+    return token ? "wrong token" : "no token";
   }
+  if (!response.ok) throw new Error(`whoami: HTTP ${response.status}`);
   const who = await response.json();
-  role = who.role;
+  setRole(who.role);
   $("identity").textContent = `${who.name} · ${who.role}`;
-  document.body.classList.toggle("operator", role === "operator");
   hideNotice();
-  return true;
+  return null;
+}
+
+function setRole(newRole) {
+  if (newRole === role) return;
+  role = newRole;
+  document.body.classList.toggle("operator", role === "operator");
+  for (const [name, record] of rows) fillCommands(record, fleet.drives.get(name));
 }
 
 function showNotice(text) { $("notice").textContent = text; $("notice").hidden = false; }
@@ -77,37 +118,52 @@ function hideNotice() { $("notice").hidden = true; }
 function connect() {
   const scheme = location.protocol === "https:" ? "wss:" : "ws:";
   const query = token ? `?token=${encodeURIComponent(token)}` : "";
-  socket = new WebSocket(`${scheme}//${location.host}/api/v1/stream${query}`);
-  socket.onopen = () => { retryMs = 500; setConnection("live", "pill-up"); };
-  socket.onmessage = (event) => handle(JSON.parse(event.data));
-  socket.onclose = () => {
+  const ws = new WebSocket(`${scheme}//${location.host}/api/v1/stream${query}`);
+  socket = ws;
+  ws.onopen = () => { retryMs = 500; setConnection("live", "pill-up"); };
+  ws.onmessage = (event) => handle(JSON.parse(event.data));
+  ws.onclose = (event) => {
+    if (socket !== ws) return;  // replaced on purpose (a new token)
+    socket = null;
+    if (event.code === 1008) showNotice(`The stream was refused: ${event.reason || "not allowed"}.`);
     setConnection("reconnecting…", "pill-down");
-    setTimeout(start, retryMs);
-    retryMs = Math.min(retryMs * 2, 10000);
+    retry();
   };
+}
+
+function retry() {
+  clearTimeout(retryTimer);
+  retryTimer = setTimeout(start, retryMs);
+  retryMs = Math.min(retryMs * 2, 10000);
 }
 
 function setConnection(text, cls) {
   const pill = $("connection");
-  pill.textContent = text;
+  put(pill, text);
   pill.className = `pill ${cls}`;
 }
 
 function handle(message) {
   switch (message.type) {
-    case "snapshot":
-      fleet.drives.clear();
-      for (const drive of message.drives) { fleet.drives.set(drive.name, drive); sample(drive); }
+    case "snapshot": {
+      const names = new Set();
+      for (const drive of message.drives) {
+        fleet.drives.set(drive.name, drive);
+        names.add(drive.name);
+        dirty.add(drive.name);
+      }
+      for (const name of [...fleet.drives.keys()]) {
+        if (!names.has(name)) { fleet.drives.delete(name); rows.get(name)?.row.remove(); rows.delete(name); }
+      }
       fleet.buses.clear();
       for (const bus of message.buses) fleet.buses.set(bus.name, bus);
-      $("drives").tBodies[0].replaceChildren();
-      for (const name of fleet.drives.keys()) dirty.add(name);
       linesDirty = true;
       break;
+    }
     case "drive":
       fleet.drives.set(message.drive.name, message.drive);
-      sample(message.drive);
       dirty.add(message.drive.name);
+      if (detail && detail.kind === "drive" && detail.name === message.drive.name) sampleDrive(message.drive);
       break;
     case "line": {
       const bus = fleet.buses.get(message.bus) || { name: message.bus, drives: [] };
@@ -116,19 +172,13 @@ function handle(message) {
       fleet.buses.set(message.bus, bus);
       linesDirty = true;
       if (message.reason) logEvent(`${message.bus}: ${message.up ? "up" : "down"} (${message.reason})`);
+      if (message.stats && detail && detail.kind === "line" && detail.name === message.bus) sampleLine(bus);
       break;
     }
     case "condition":
-      logEvent(`${message.drive}: ${message.kind} ${message.code} ${message.text} ` +
-               (message.active ? "raised" : "cleared"), message.active ? message.kind : "");
-      break;
     case "availability":
-      logEvent(`${message.drive} went ${message.online ? "online" : "offline"}`,
-               message.online ? "" : "warning");
-      break;
     case "command":
-      logEvent(`${message.drive}: ${message.command.action} by ${message.command.actor || "?"} → ` +
-               `${message.result.outcome}${message.result.reason ? ` (${message.result.reason})` : ""}`);
+      logEvent(...eventText(message), message.drive);
       break;
     case "dropped":
       logEvent(`${message.count} events missed (this page fell behind)`, "warning");
@@ -137,22 +187,26 @@ function handle(message) {
   schedule();
 }
 
-function sample(drive) {
-  let trend = fleet.trends.get(drive.name);
-  if (!trend) { trend = []; fleet.trends.set(drive.name, trend); }
-  const now = Date.now();
-  const hz = drive.online ? (drive.output_frequency_hz ?? 0) : null;
-  const last = trend[trend.length - 1];
-  if (last && now - last[0] < TREND_STEP_MS) last[1] = hz;
-  else trend.push([now, hz]);
-  if (trend.length > TREND_POINTS) trend.splice(0, trend.length - TREND_POINTS);
+// A drive's event message as [text, class].
+function eventText(message) {
+  switch (message.type) {
+    case "condition":
+      return [`${message.drive}: ${message.kind} ${message.code} ${message.text} ` +
+              (message.active ? "raised" : "cleared"), message.active ? message.kind : ""];
+    case "availability":
+      return [`${message.drive} went ${message.online ? "online" : "offline"}`, message.online ? "" : "warning"];
+    case "command":
+      return [`${message.drive}: ${message.command.action} by ${message.command.actor || "?"} → ` +
+              `${message.result.outcome}${message.result.reason ? ` (${message.result.reason})` : ""}`, ""];
+  }
+  return [JSON.stringify(message), ""];
 }
 
 function schedule() {
   if (!frame) frame = requestAnimationFrame(render);
 }
 
-// -- rendering ---------------------------------------------------------------------------
+// -- the fleet table ----------------------------------------------------------------------
 
 function render() {
   frame = 0;
@@ -160,25 +214,78 @@ function render() {
   for (const name of dirty) {
     const drive = fleet.drives.get(name);
     if (!drive) continue;
-    const row = driveRow(drive);
-    const old = body.querySelector(`tr[data-drive="${CSS.escape(name)}"]`);
-    if (old) { keepInput(old, row); old.replaceWith(row); } else body.append(row);
+    let record = rows.get(name);
+    if (!record) {
+      record = makeRow(drive);
+      rows.set(name, record);
+      body.append(record.row);
+    }
+    updateRow(record, drive);
+    if (detail && detail.kind === "drive" && detail.name === name) updateDriveView(drive);
   }
   dirty.clear();
-  if (linesDirty) { renderLines(); linesDirty = false; }
-  $("drive-count").textContent = `(${fleet.drives.size})`;
-}
-
-function keepInput(oldRow, newRow) {
-  const before = oldRow.querySelector("input");
-  const after = newRow.querySelector("input");
-  if (before && after) {
-    after.value = before.value;
-    if (document.activeElement === before) setTimeout(() => after.focus(), 0);
+  if (linesDirty) {
+    renderLines();
+    if (detail && detail.kind === "line") updateLineView();
+    linesDirty = false;
   }
+  put($("drive-count"), `(${fleet.drives.size})`);
 }
 
-function stateText(d) {
+function makeRow(d) {
+  const record = { shown: {}, commandsFor: null };
+  record.open = el("button", { type: "button", class: "link name", text: d.name,
+                               "data-testid": "open", title: "open this drive's view",
+                               onclick: () => { location.hash = `drive=${encodeURIComponent(d.name)}`; } });
+  record.where = el("div", { class: "muted small" });
+  record.state = el("td", { class: "state", "data-testid": "state", "data-label": "State" });
+  record.frequency = el("span");
+  record.reference = el("div", { class: "muted small" });
+  record.values = el("td", { class: "values", "data-testid": "values", "data-label": "Values" });
+  record.conditions = el("ul", { class: "conditions", "data-testid": "conditions" });
+  record.commands = el("td", { class: "operator-only", "data-label": "Commands" });
+  record.row = el("tr", { "data-drive": d.name },
+    el("td", { "data-label": "Drive" }, record.open, el("span", { class: "badge", text: d.control }), record.where),
+    record.state,
+    el("td", { class: "frequency", "data-testid": "frequency", "data-label": "Output" },
+       record.frequency, record.reference),
+    record.values,
+    el("td", { "data-label": "Alarms · warnings" }, record.conditions),
+    record.commands);
+  fillCommands(record, d);
+  return record;
+}
+
+// Rebuild the pieces of a cell only when what they show changed.
+function replaceIf(record, key, signature, node, build) {
+  if (record.shown[key] === signature) return;
+  record.shown[key] = signature;
+  node.replaceChildren(...build());
+}
+
+function updateRow(record, d) {
+  const row = record.row;
+  row.classList.toggle("offline", !d.online);
+  row.classList.toggle("faulted", d.fault);
+  put(record.where, `${d.bus} · ${d.address}`);
+  const pills = stateParts(d);
+  replaceIf(record, "state", JSON.stringify(pills), record.state, () => pillNodes(pills));
+  put(record.frequency, `${fmt(d.output_frequency_hz, 2)} Hz`);
+  record.frequency.classList.toggle("old", frequencyIsOld(d));
+  record.frequency.title = frequencyTitle(d);
+  put(record.reference, d.reference_pct != null ? `ref ${fmt(d.reference_pct)} %` : "");
+  const values = measured(d);
+  replaceIf(record, "values", JSON.stringify(values), record.values, () => values.map(([param, label, text, title]) =>
+    el("span", { class: "value", title: `${param} · ${title}` },
+       el("span", { class: "vname", text: label }), " ", el("span", { text }))));
+  const conditions = conditionItems(d);
+  replaceIf(record, "conditions", JSON.stringify(conditions), record.conditions,
+            () => conditions.map(([cls, text, title]) => el("li", { class: cls, text, title })));
+  if (record.commandsFor !== commandsKey(d)) fillCommands(record, d);
+  markStale(record, d);
+}
+
+function stateParts(d) {
   if (!d.online) return [["offline", "pill-down"]];
   const parts = [[d.running ? `running ${d.direction}` : "stopped", d.running ? "pill-up" : "pill-idle"]];
   if (d.fault) parts.push(["fault", "pill-down"]);
@@ -187,81 +294,84 @@ function stateText(d) {
   return parts;
 }
 
-function driveRow(d) {
-  const row = el("tr", { "data-drive": d.name });
-  if (!d.online) row.classList.add("offline");
-  if (d.fault) row.classList.add("faulted");
-  row.append(
-    el("td", {}, el("span", { class: "name", text: d.name }),
-       el("span", { class: "badge", text: d.control })),
-    el("td", { class: "num", text: `${d.bus} · ${d.address}` }),
-    el("td", { class: "state", "data-testid": "state" },
-       ...stateText(d).map(([text, cls]) => el("span", { class: `pill ${cls}`, text }), " ")),
-    el("td", { class: "num frequency", "data-testid": "frequency" },
-       `${fmt(d.output_frequency_hz, 2)} Hz`,
-       d.reference_pct != null ? el("div", { class: "muted", text: `ref ${fmt(d.reference_pct)} %` }) : null),
-    el("td", {}, trendSvg(fleet.trends.get(d.name) || [])),
-    el("td", { class: "values" }, ...Object.entries(d.values).map(([param, v]) =>
-       el("span", { title: param, text: `${param} ${fmt(v.value, 2)} ${v.unit}` }))),
-    el("td", {}, conditionList(d)),
-  );
-  if (role === "operator") {
-    row.append(el("td", { class: "operator-only" },
-                  d.control === "bus" ? commandCell(d) : "monitor only"));
+function pillNodes(parts) {
+  return parts.map(([text, cls]) => el("span", { class: `pill ${cls}`, text }));
+}
+
+function frequencyIsOld(d) {
+  const read = seconds(d.output_frequency_updated_at), status = seconds(d.updated_at);
+  return read != null && status != null && status - read > OLD_FREQUENCY_S;
+}
+
+function frequencyTitle(d) {
+  const read = seconds(d.output_frequency_updated_at);
+  return read == null ? "output frequency not read yet" : `output frequency read at ${clock(read)}`;
+}
+
+// The drive's monitored values as [parameter, name, "8.82 A", title]; alarm and warning
+// words are not values to read as numbers: their texts show under alarms and warnings.
+function measured(d) {
+  const out = [];
+  for (const [param, v] of Object.entries(d.values || {})) {
+    if (v.texts) continue;
+    const read = seconds(v.updated_at);
+    out.push([param, v.name || param, `${fmtValue(v.value)}${v.unit ? ` ${v.unit}` : ""}`,
+              read == null ? "" : `read at ${clock(read)}`]);
   }
-  return row;
+  return out;
 }
 
-function conditionList(d) {
-  const list = el("ul", { class: "conditions", "data-testid": "conditions" });
-  for (const a of d.alarms) list.append(el("li", { class: "alarm", text: `⚠ ${a.code} ${a.text}` }));
-  for (const w of d.warnings) list.append(el("li", { class: "warning", text: `${w.code} ${w.text}` }));
-  return list;
+function conditionItems(d) {
+  return [
+    ...d.alarms.map((a) => ["alarm", `⚠ ${a.code} ${a.text}`, `alarm ${a.code}`]),
+    ...d.warnings.map((w) => ["warning", `${w.code} ${w.text}`, `warning ${w.code}`]),
+  ];
 }
 
-function trendSvg(points) {
-  const ns = "http://www.w3.org/2000/svg";
-  const svg = document.createElementNS(ns, "svg");
-  svg.setAttribute("class", "trend");
-  svg.setAttribute("viewBox", "0 0 120 28");
-  svg.setAttribute("preserveAspectRatio", "none");
-  const known = points.filter((p) => p[1] !== null);
-  if (known.length > 1) {
-    const t0 = known[0][0], t1 = known[known.length - 1][0];
-    const top = Math.max(1, ...known.map((p) => p[1]));
-    const line = document.createElementNS(ns, "polyline");
-    line.setAttribute("points", known.map(([t, hz]) =>
-      `${(((t - t0) / Math.max(1, t1 - t0)) * 118 + 1).toFixed(1)},${(27 - (hz / top) * 25).toFixed(1)}`).join(" "));
-    svg.append(line);
-  }
-  return svg;
+function markStale(record, d) {
+  const age = Date.now() / 1000 - (seconds(d.updated_at) ?? 0);
+  const stale = d.online && age > STALE_AFTER_S;
+  record.row.classList.toggle("stale", stale);
+  record.row.title = stale ? `no news from this drive for ${Math.round(age)} s` : "";
 }
 
-function commandCell(d) {
-  const cell = el("div", { class: "commands" });
-  const hz = el("input", { type: "number", step: "0.1", min: "0", placeholder: "Hz",
+const commandsKey = (d) => `${role}|${d.control}`;
+
+// The command cell is built once per role and never touched by state updates.
+function fillCommands(record, d) {
+  if (!d) return;
+  record.commandsFor = commandsKey(d);
+  if (role !== "operator") { record.commands.replaceChildren(); return; }
+  if (d.control !== "bus") { record.commands.replaceChildren("monitor only"); return; }
+  const name = d.name;
+  const hz = el("input", { type: "text", inputMode: "decimal", placeholder: "Hz", autocomplete: "off",
                            "data-testid": "reference", title: "reference in Hz" });
-  const button = (label, body, verb) => el("button", {
+  const button = (label, body, question) => el("button", {
     type: "button", text: label, "data-action": body.action,
-    onclick: () => confirmCommand(d.name, body, verb),
+    onclick: () => confirmCommand(name, body, question),
   });
-  cell.append(
-    button("Start", { action: "start" }, `Start ${d.name}?`),
-    button("Stop", { action: "stop" }, `Stop ${d.name}?`),
-    button("Reset", { action: "reset" }, `Reset ${d.name}'s alarms?`),
+  const setReference = () => {
+    const value = Number.parseFloat(hz.value.replace(",", "."));
+    if (!Number.isFinite(value) || value < 0) { toast("Enter a reference in Hz first (0 or more)", true); return; }
+    confirmCommand(name, { action: "set_reference", frequency_hz: value },
+                   `Set ${name}'s reference to ${value} Hz?`);
+  };
+  hz.addEventListener("keydown", (event) => {
+    if (event.key !== "Enter") return;
+    event.preventDefault();  // this Enter must not go on to press a button in the dialog
+    setReference();
+  });
+  record.commands.replaceChildren(el("div", { class: "commands" },
+    button("Start", { action: "start" }, `Start ${name}?`),
+    button("Stop", { action: "stop" }, `Stop ${name}?`),
+    button("Reset", { action: "reset" }, `Reset ${name}'s alarms?`),
     hz,
-    el("button", { type: "button", text: "Set", "data-action": "set_reference", onclick: () => {
-      const value = Number.parseFloat(hz.value);
-      if (!Number.isFinite(value)) { toast("Enter a reference in Hz first", true); return; }
-      confirmCommand(d.name, { action: "set_reference", frequency_hz: value },
-                     `Set ${d.name}'s reference to ${value} Hz?`);
-    } }),
-  );
-  return cell;
+    el("button", { type: "button", text: "Set", "data-action": "set_reference", onclick: setReference })));
 }
 
 function confirmCommand(name, body, question) {
   const dialog = $("confirm");
+  if (dialog.open) return;
   $("confirm-text").textContent = question;
   dialog.returnValue = "";
   dialog.onclose = async () => {
@@ -270,39 +380,73 @@ function confirmCommand(name, body, question) {
                                { method: "POST", body: JSON.stringify(body) });
     const result = await response.json().catch(() => ({}));
     const outcome = result.outcome || `HTTP ${response.status}`;
-    toast(`${name}: ${body.action} → ${outcome}${result.reason ? ` — ${result.reason}` : ""}`,
-          !response.ok);
+    const reason = result.reason || result.detail || "";
+    toast(`${name}: ${body.action} → ${outcome}${reason ? ` — ${reason}` : ""}`, !response.ok);
   };
   dialog.showModal();
+  dialog.querySelector('button[value="cancel"]').focus();  // a stray Enter cancels
+}
+
+// -- lines --------------------------------------------------------------------------------
+
+const LINE_FACTS = [
+  ["requests", (s) => s.requests], ["replies", (s) => s.replies], ["timeouts", (s) => s.timeouts],
+  ["errors", (s) => sumOf(s, ["checksum_errors", "malformed", "unexpected"])],
+  ["utilisation", (s) => (s.utilisation != null ? `${fmt(s.utilisation * 100)} %` : null)],
+  ["mean latency", (s) => (s.latency_s && s.latency_s.count
+    ? `${fmt((s.latency_s.sum / s.latency_s.count) * 1000, 2)} ms` : null)],
+];
+
+function sumOf(stats, keys) {
+  const present = keys.filter((k) => typeof stats[k] === "number");
+  return present.length ? present.reduce((total, k) => total + stats[k], 0) : null;
 }
 
 function renderLines() {
   const box = $("lines");
-  box.replaceChildren();
   for (const bus of fleet.buses.values()) {
-    const s = bus.stats || {};
-    const latency = s.latency_s && s.latency_s.count ? (s.latency_s.sum / s.latency_s.count) * 1000 : null;
-    const rows = [
-      ["requests", s.requests], ["replies", s.replies], ["timeouts", s.timeouts],
-      ["retries", s.retries], ["checksum errors", s.checksum_errors], ["noise bytes", s.noise_bytes],
-      ["utilisation", s.utilisation != null ? `${fmt(s.utilisation * 100)} %` : null],
-      ["mean latency", latency != null ? `${fmt(latency, 2)} ms` : null],
-    ];
-    const list = el("dl");
-    for (const [label, value] of rows) list.append(el("dt", { text: label }), el("dd", { text: value ?? "–" }));
-    box.append(el("div", { class: "line-card", "data-bus": bus.name },
-      el("h3", {}, el("span", { text: bus.name }),
-         el("span", { class: `pill ${bus.up ? "pill-up" : "pill-down"}`, text: bus.up ? "up" : "down" })),
-      el("div", { class: "muted", text: [bus.port, bus.protocol, bus.baudrate && `${bus.baudrate} Bd`]
-        .filter(Boolean).join(" · ") }),
-      list));
+    let card = cards.get(bus.name);
+    if (!card) {
+      card = { pill: el("span", { class: "pill" }), where: el("div", { class: "muted small" }), facts: new Map() };
+      const list = el("dl", { class: "facts" });
+      for (const [label] of LINE_FACTS) {
+        const value = el("dd");
+        card.facts.set(label, value);
+        list.append(el("dt", { text: label }), value);
+      }
+      card.node = el("div", { class: "line-card", "data-bus": bus.name },
+        el("h3", {}, el("button", { type: "button", class: "link", text: bus.name, "data-testid": "open-line",
+                                    onclick: () => { location.hash = `line=${encodeURIComponent(bus.name)}`; } }),
+           card.pill),
+        card.where, list);
+      cards.set(bus.name, card);
+      box.append(card.node);
+    }
+    const stats = bus.stats || {};
+    // line_silent and down_reason come with the line-fault statistics where the bus has them
+    const silent = bus.up && stats.line_silent === true;
+    put(card.pill, !bus.up ? "down" : silent ? "silent" : "up");
+    card.pill.className = `pill ${!bus.up ? "pill-down" : silent ? "pill-warn" : "pill-up"}`;
+    card.pill.title = silent ? "every drive fell silent together: cable, adapter or power?" : (stats.down_reason || "");
+    put(card.where, [bus.port, bus.protocol, bus.baudrate && `${bus.baudrate} Bd`, !bus.up && stats.down_reason]
+      .filter(Boolean).join(" · "));
+    for (const [label, pick] of LINE_FACTS) put(card.facts.get(label), String(pick(stats) ?? "–"));
   }
 }
 
-function logEvent(text, cls = "") {
+// -- events -------------------------------------------------------------------------------
+
+function logEvent(text, cls = "", drive = null) {
+  const stamp = new Date().toLocaleTimeString();
   const list = $("events");
-  list.prepend(el("li", { class: cls, text: `${new Date().toLocaleTimeString()} ${text}` }));
+  list.prepend(el("li", { class: cls, text: `${stamp} ${text}` }));
   while (list.children.length > EVENTS_KEPT) list.lastChild.remove();
+  if (!drive) return;
+  const kept = driveEvents.get(drive) || [];
+  kept.unshift([stamp, text, cls]);
+  kept.length = Math.min(kept.length, DRIVE_EVENTS_KEPT);
+  driveEvents.set(drive, kept);
+  if (detail && detail.kind === "drive" && detail.name === drive) renderDriveEvents(drive);
 }
 
 let toastTimer = 0;
@@ -315,18 +459,238 @@ function toast(text, bad = false) {
   toastTimer = setTimeout(() => { box.hidden = true; }, 6000);
 }
 
-// -- start ------------------------------------------------------------------------------
+// -- the drive view -------------------------------------------------------------------------
+
+async function openDrive(name) {
+  closeDetail();
+  const drive = fleet.drives.get(name);
+  $("dv-name").textContent = name;
+  $("dv-where").textContent = drive ? `${drive.bus} · address ${drive.address} · ${drive.protocol} · ${drive.control}` : "";
+  $("dv-read-result").textContent = "";
+  detail = { kind: "drive", name, charts: [], t: [], series: [], shown: {} };
+  showView("drive-view");
+  if (drive) updateDriveView(drive);
+  renderDriveEvents(name);
+  const current = detail;
+  const response = await api(`/api/v1/drives/${encodeURIComponent(name)}/history`);
+  if (detail !== current) return;  // another view was opened meanwhile
+  if (!response.ok) { $("dv-charts").textContent = `No history: HTTP ${response.status}`; return; }
+  const history = await response.json();
+  // the daemon's record of this drive's events, newest first, as the page keeps them
+  driveEvents.set(name, (history.events || []).map((message) =>
+    [clock(seconds(message.at)), ...eventText(message)]).reverse());
+  renderDriveEvents(name);
+  current.t = history.t;
+  current.series = history.series;
+  buildCharts(current, $("dv-charts"), history.series.map((s) => [s.key, s.name, s.unit]));
+}
+
+function updateDriveView(d) {
+  replaceIf(detail, "state", JSON.stringify(stateParts(d)), $("dv-state"), () => pillNodes(stateParts(d)));
+  const facts = [
+    ["status word", d.status_word == null ? "–" : `0x${d.status_word.toString(16).toUpperCase().padStart(4, "0")}`],
+    ["bits", d.status_word == null ? "–" : d.status_word.toString(2).padStart(16, "0").replace(/(.{4})(?=.)/g, "$1 ")],
+    ["bits set", (d.status_bits || []).map((b) => b.replaceAll("_", " ")).join(", ") || "none"],
+    ["online", d.online ? "yes" : "no"], ["running", d.running ? "yes" : "no"],
+    ["direction", d.direction], ["at reference", d.at_reference ? "yes" : "no"],
+    ["fault", d.fault ? "yes" : "no"], ["warning", d.warning ? "yes" : "no"],
+    ["output frequency", `${fmt(d.output_frequency_hz, 2)} Hz`],
+    ["frequency read at", d.output_frequency_updated_at ? clock(seconds(d.output_frequency_updated_at)) : "–"],
+    ["reference", d.reference_pct != null ? `${fmt(d.reference_pct)} %` : "not commanded"],
+    ["last reply", d.updated_at ? clock(seconds(d.updated_at)) : "–"],
+  ];
+  replaceIf(detail, "status", JSON.stringify(facts), $("dv-status"),
+            () => facts.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
+  const watchdog = d.watchdog
+    ? `${d.watchdog.verdict} — timeout ${d.watchdog.timeout_s ?? "–"} s, action ${d.watchdog.action}`
+    : d.control === "bus" ? "not judged yet" : "monitor only: the gateway does not command this drive";
+  put($("dv-watchdog"), watchdog);
+  const values = Object.entries(d.values || {}).map(([param, v]) => [
+    `${v.name || param} (${param})`,
+    v.texts ? (v.texts.length ? v.texts.join(", ") : "none") : `${fmtValue(v.value)}${v.unit ? ` ${v.unit}` : ""}`,
+    v.updated_at ? `read at ${clock(seconds(v.updated_at))}` : "",
+  ]);
+  replaceIf(detail, "values", JSON.stringify(values), $("dv-values"),
+            () => values.flatMap(([k, v, title]) => [el("dt", { text: k }), el("dd", { text: v, title })]));
+  const conditions = [
+    ...d.alarms.map((a) => ["alarm", `alarm ${a.code}: ${a.text}`]),
+    ...d.warnings.map((w) => ["warning", `warning ${w.code}: ${w.text}`]),
+  ];
+  replaceIf(detail, "conditions", JSON.stringify(conditions), $("dv-conditions"), () => (conditions.length
+    ? conditions.map(([cls, text]) => el("li", { class: cls, text }))
+    : [el("li", { class: "muted", text: "none active" })]));
+}
+
+function renderDriveEvents(name) {
+  const kept = driveEvents.get(name) || [];
+  $("dv-events").replaceChildren(...kept.map(([stamp, text, cls]) => el("li", { class: cls, text: `${stamp} ${text}` })));
+}
+
+// A drive message for the open view: one more point on its charts.
+function sampleDrive(d) {
+  const at = seconds(d.updated_at) ?? Date.now() / 1000;
+  if (!detail.charts.length) return;
+  const values = { output_frequency_hz: d.online ? d.output_frequency_hz : null };
+  for (const [param, v] of Object.entries(d.values || {})) values[param] = d.online && !v.texts ? v.value : null;
+  addPoint(detail, at, detail.series.map((s) => values[s.key] ?? null));
+}
+
+async function readParameter(event) {
+  event.preventDefault();
+  const name = detail && detail.kind === "drive" ? detail.name : null;
+  const param = $("dv-param").value.trim();
+  if (!name || !param) return;
+  const out = $("dv-read-result");
+  out.textContent = `reading ${param}…`;
+  const response = await api(`/api/v1/drives/${encodeURIComponent(name)}/parameters/${encodeURIComponent(param)}`);
+  const result = await response.json().catch(() => ({}));
+  if (response.ok) out.textContent = `${param} = ${fmtValue(result.value)}${result.unit ? ` ${result.unit}` : ""} (${new Date().toLocaleTimeString()})`;
+  else out.textContent = `${param}: ${result.outcome || `HTTP ${response.status}`}${result.reason || result.detail ? ` — ${result.reason || result.detail}` : ""}`;
+}
+
+// -- the line view ------------------------------------------------------------------------------
+
+const LINE_SERIES = [
+  ["requests_per_s", "Requests", "/s"], ["timeouts_per_s", "Timeouts", "/s"],
+  ["errors_per_s", "Errors", "/s"],
+];
+
+async function openLine(name) {
+  closeDetail();
+  const bus = fleet.buses.get(name);
+  $("lv-name").textContent = name;
+  $("lv-where").textContent = bus ? [bus.port, bus.protocol, bus.baudrate && `${bus.baudrate} Bd`].filter(Boolean).join(" · ") : "";
+  detail = { kind: "line", name, charts: [], t: [], series: LINE_SERIES.map(([key]) => ({ key, data: [] })),
+             shown: {} };
+  showView("line-view");
+  updateLineView();
+  const current = detail;
+  const response = await api(`/api/v1/buses/${encodeURIComponent(name)}/history`);
+  if (detail !== current) return;
+  if (!response.ok) { $("lv-charts").textContent = `No history: HTTP ${response.status}`; return; }
+  const history = await response.json();
+  current.t = history.t;
+  current.series = LINE_SERIES.map(([key]) => ({ key, data: history.series[key] || [] }));
+  buildCharts(current, $("lv-charts"), LINE_SERIES);
+}
+
+// Every statistic the line reports, including ones this page does not know by name.
+function updateLineView() {
+  const bus = fleet.buses.get(detail.name);
+  if (!bus) return;
+  const facts = [["port", bus.up ? "up" : "down"]];
+  for (const [key, value] of Object.entries(bus.stats || {})) {
+    if (typeof value === "number") {
+      const text = key === "utilisation" ? `${fmt(value * 100)} %` : Number.isInteger(value) ? String(value) : fmtValue(value);
+      facts.push([key.replaceAll("_", " "), text]);
+    }
+    else if (typeof value === "string" || typeof value === "boolean") facts.push([key.replaceAll("_", " "), String(value)]);
+  }
+  replaceIf(detail, "stats", JSON.stringify(facts), $("lv-stats"),
+            () => facts.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
+}
+
+// A stats message for the open line: rates since the previous one.
+function sampleLine(bus) {
+  const stats = bus.stats, now = Date.now() / 1000, last = detail.lastStats;
+  detail.lastStats = { at: now, stats };
+  if (!last || !detail.charts.length) return;
+  const span = now - last.at;
+  const rate = (keys) => Math.max(0, (sumOf(stats, keys) - sumOf(last.stats, keys)) / span);
+  addPoint(detail, now, [rate(["requests"]), rate(["timeouts"]), rate(["checksum_errors", "malformed", "unexpected"])]);
+}
+
+// -- charts (uPlot, served by the daemon) -----------------------------------------------------
+
+function buildCharts(state, box, specs) {
+  box.replaceChildren();
+  if (typeof uPlot === "undefined") { box.textContent = "The chart library did not load."; return; }
+  // every holder first, so each is measured in the finished grid
+  const holders = specs.map(([key]) => box.appendChild(el("div", { class: "chart", "data-series": key })));
+  state.charts = specs.map(([key, title, unit], i) => {
+    const named = !unit || unit === "/s" || title.includes(`[${unit}]`);
+    const opts = {
+      title: named ? title : `${title} [${unit}]`,
+      width: chartWidth(holders[i]), height: 200,
+      // at least a minute wide, so a few points do not spread over years
+      scales: { x: { time: true, range: xRange } },
+      legend: { show: false },
+      series: [{}, { label: title, stroke: "#2b6cb0", width: 1.5, spanGaps: false }],
+      axes: [
+        { label: "time", labelSize: 18, size: 40 },
+        { label: unit || "", labelSize: 18, size: 55 },
+      ],
+    };
+    return new uPlot(opts, [state.t, state.series[i].data], holders[i]);
+  });
+}
+
+function xRange(u, min, max) {
+  if (min == null || max == null) { const now = Date.now() / 1000; return [now - 60, now]; }
+  return [Math.min(min, max - 60), max];
+}
+
+const chartWidth = (holder) => Math.max(240, holder.clientWidth - 12);
+
+function addPoint(state, at, values) {
+  state.t.push(at);
+  state.series.forEach((s, i) => s.data.push(values[i]));
+  const from = at - WINDOW_S;
+  let drop = 0;
+  while (drop < state.t.length && state.t[drop] < from) drop++;
+  if (drop) { state.t.splice(0, drop); for (const s of state.series) s.data.splice(0, drop); }
+  state.charts.forEach((chart, i) => chart.setData([state.t, state.series[i].data]));
+}
+
+function resizeCharts() {
+  if (!detail) return;
+  for (const chart of detail.charts) {
+    const holder = chart.root.parentElement;
+    chart.setSize({ width: chartWidth(holder), height: 200 });
+  }
+}
+
+function closeDetail() {
+  if (detail) for (const chart of detail.charts) chart.destroy();
+  detail = null;
+}
+
+// -- views and start -------------------------------------------------------------------------
+
+function showView(id) {
+  for (const name of ["fleet-view", "drive-view", "line-view"]) $(name).hidden = name !== id;
+  window.scrollTo(0, 0);
+}
+
+function route() {
+  if (takeTokenFromFragment()) { restart(); return; }
+  const match = location.hash.match(/^#(drive|line)=(.+)$/);
+  if (match && match[1] === "drive") openDrive(decodeURIComponent(match[2]));
+  else if (match) openLine(decodeURIComponent(match[2]));
+  else { closeDetail(); showView("fleet-view"); }
+}
 
 async function start() {
+  let problem;
   try {
-    if (!(await identify())) { setConnection("no token", "pill-down"); return; }
+    problem = await identify();
   } catch (error) {
     setConnection("daemon unreachable", "pill-down");
-    setTimeout(start, retryMs);
-    retryMs = Math.min(retryMs * 2, 10000);
+    retry();
     return;
   }
+  if (problem) { setConnection(problem, "pill-down"); return; }
   connect();
+}
+
+// A new token: drop the stream that was opened with the old one and start over.
+function restart() {
+  clearTimeout(retryTimer);
+  retryMs = 500;
+  const old = socket;
+  socket = null;
+  if (old) old.close();
+  start();
 }
 
 function setupTokenDialog() {
@@ -338,11 +702,15 @@ function setupTokenDialog() {
     else return;
     if (token) sessionStorage.setItem("fcmaster.token", token);
     else sessionStorage.removeItem("fcmaster.token");
-    if (socket) { socket.onclose = null; socket.close(); }
-    start();
+    restart();
   };
 }
 
 takeTokenFromFragment();
 setupTokenDialog();
+$("dv-read").addEventListener("submit", readParameter);
+window.addEventListener("hashchange", route);
+window.addEventListener("resize", () => { clearTimeout(resizeCharts.timer); resizeCharts.timer = setTimeout(resizeCharts, 150); });
+setInterval(() => { for (const [name, record] of rows) markStale(record, fleet.drives.get(name)); }, 2000);
+route();
 start();

@@ -301,6 +301,7 @@ def _value(exchange: Exchange, telegram: Telegram, ak: int, frame: bytes) -> Par
             raw=None,
             value=telegram.text.decode("latin-1").rstrip("\x00 "),
             unit="",
+            title=spec.name,
         )
     if ak not in (ResponseAk.VALUE_WORD, ResponseAk.VALUE_DWORD) or spec.data_type is DataType.TEXT:
         raise MalformedReply(f"AK {ak} does not carry a value", raw=frame)
@@ -311,4 +312,5 @@ def _value(exchange: Exchange, telegram: Telegram, ak: int, frame: bytes) -> Par
         raw=raw,
         value=spec.to_value(raw),
         unit=spec.unit,
+        title=spec.name,
     )

@@ -311,6 +311,7 @@ class EncCodec:
                 raw=raw,
                 value=spec.to_value(raw),
                 unit=spec.unit,
+                title=spec.name,
             )
         status = frequency = None
         if command == Command.READ_VALUE and data is not None:

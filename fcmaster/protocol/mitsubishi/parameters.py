@@ -204,8 +204,12 @@ def read_widths(key: ParameterKey) -> tuple[int, ...]:
 
 def key_value(key: ParameterKey, raw: int, text: str | None = None) -> ParameterValue:
     """The value ``raw`` data (or the model-name ``text``) of ``key`` stands for."""
-    if text is not None:
-        return ParameterValue(parameter=key, index=0, raw=None, value=text.rstrip(), unit="")
     target = resolve(key)
+    if text is not None:
+        return ParameterValue(
+            parameter=key, index=0, raw=None, value=text.rstrip(), unit="", title=target.name
+        )
     value = target.to_value(raw) if isinstance(target, ParameterSpec) else item_value(target, raw)
-    return ParameterValue(parameter=key, index=0, raw=raw, value=value, unit=target.unit)
+    return ParameterValue(
+        parameter=key, index=0, raw=raw, value=value, unit=target.unit, title=target.name
+    )
