@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import pytest
-from hypothesis import given
+from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import ParameterKey
 from fcmaster.protocol.mitsubishi import PARAMETERS, lookup, parse_parameter, resolve
-from fcmaster.protocol.mitsubishi.parameters import ParameterSpec
+from fcmaster.protocol.mitsubishi.parameters import SETTING_8888, SETTING_9999, ParameterSpec
 
 
 @pytest.mark.parametrize(
@@ -38,7 +38,19 @@ def test_values_that_cannot_travel_are_refused(value: float) -> None:
 @given(st.sampled_from(sorted(PARAMETERS)), st.integers(0, 0xFFFFFF))
 def test_values_round_trip(number: int, raw: int) -> None:
     spec = PARAMETERS[number]
-    assert spec.to_raw(spec.to_value(raw)) == raw
+    value = spec.to_value(raw)
+    # A value that reads as 9999 or 8888 is written as the special setting (HFFFF/HFFFE), by
+    # design; for a parameter counted in whole units that includes raw 9999 and 8888 data.
+    assume(value not in (9999.0, 8888.0) or raw in (SETTING_9999, SETTING_8888))
+    assert spec.to_raw(value) == raw
+
+
+def test_a_whole_unit_parameter_writes_9999_and_8888_as_the_special_settings() -> None:
+    spec = PARAMETERS[77]
+    assert (spec.to_raw(spec.to_value(9999)), spec.to_raw(spec.to_value(8888))) == (
+        0xFFFF,
+        0xFFFE,
+    )
 
 
 def test_parameters_outside_the_table_are_raw() -> None:
