@@ -397,11 +397,12 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
             if bus.protocol != "mitsubishi" and key in bus.model_fields_set:
                 problems.append((f"{where}.{key}", "only mitsubishi lines have one"))
         lines.append(_line(bus, tuple(drives)))
-    if model.mqtt is not None:  # names are topic levels: {base}/{bus}/{drive}/state
-        for b, bus in enumerate(model.buses):
-            _topic_level(bus.name, f"buses[{b}].name", problems)
-            for d, drive in enumerate(bus.drives):
-                _topic_level(drive.name, f"buses[{b}].drives[{d}].name", problems)
+    # Names are HTTP path segments (/api/v1/drives/{name}) and MQTT topic levels
+    # ({base}/{bus}/{drive}/state) whichever surfaces are on today: a name must work on all.
+    for b, bus in enumerate(model.buses):
+        _addressable(bus.name, f"buses[{b}].name", problems)
+        for d, drive in enumerate(bus.drives):
+            _addressable(drive.name, f"buses[{b}].drives[{d}].name", problems)
     if model.modbus is not None:
         modbus_units(model, problems)
         host, _ = modbus_listen(model.modbus.listen)
@@ -500,9 +501,19 @@ def _unique(
         seen[value] = path
 
 
-def _topic_level(name: str, path: str, problems: list[tuple[str, str]]) -> None:
-    if any(char in name for char in "/+#"):
-        problems.append((path, f"{name!r} cannot be an MQTT topic level (no /, + or #)"))
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+
+
+def _addressable(name: str, path: str, problems: list[tuple[str, str]]) -> None:
+    """A drive or bus name every surface can address: no /, +, #, %, spaces, ``..``."""
+    if not _NAME.fullmatch(name):
+        problems.append(
+            (
+                path,
+                f"{name!r} cannot be addressed over HTTP and MQTT: use 1-64 letters, digits, "
+                "'-', '_' and '.', starting with a letter or digit",
+            )
+        )
 
 
 def _bad_address(bus: BusModel, address: int, codec: DriveCodec) -> str:

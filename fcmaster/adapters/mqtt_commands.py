@@ -16,7 +16,7 @@ from typing import Any
 import aiomqtt
 import structlog
 
-from fcmaster.adapters.commands import parse_command
+from fcmaster.adapters.commands import loads, parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.mqtt_outbox import Outbox
 from fcmaster.adapters.mqtt_topics import Topics, result_payload
@@ -54,12 +54,13 @@ class CommandDesk:
                 raise UsageError("the payload is not a JSON object")
             if len(payload) > MAX_COMMAND_BYTES:
                 raise UsageError(f"the payload is longer than {MAX_COMMAND_BYTES} bytes")
-            data = json.loads(payload)
+            data = loads(payload)
         except UsageError as exc:
             self._invalid(bus, drive, None, None, str(exc))
             return
         except (ValueError, RecursionError) as exc:
-            self._invalid(bus, drive, None, None, f"the payload is not valid JSON: {exc}")
+            why = exc.msg if isinstance(exc, json.JSONDecodeError) and not exc.doc else exc
+            self._invalid(bus, drive, None, None, f"the payload is not valid JSON: {why}")
             return
         self._command(bus, drive, data)
 
@@ -93,7 +94,7 @@ class CommandDesk:
         try:
             command = parse_command(data, plan, actor=self.actor)
         except UsageError as exc:
-            self._invalid(bus, drive, command_id, action, str(exc))
+            self._refused(bus, drive, command_id, action, refusal(exc))
             return
         task = asyncio.create_task(
             self._execute(bus, drive, command_id, command), name=f"mqtt.command[{bus}/{drive}]"
@@ -117,6 +118,11 @@ class CommandDesk:
     def _invalid(
         self, bus: str, drive: str, command_id: Any, action: str | None, reason: str
     ) -> None:
+        self._refused(bus, drive, command_id, action, _result(Outcome.INVALID, reason))
+
+    def _refused(
+        self, bus: str, drive: str, command_id: Any, action: str | None, result: CommandResult
+    ) -> None:
         log.info(
             "command.completed",
             actor=self.actor,
@@ -124,10 +130,10 @@ class CommandDesk:
             drive=drive,
             command=action or "-",
             command_id=command_id,
-            outcome=Outcome.INVALID.value,
-            reason=reason,
+            outcome=result.outcome.value,
+            reason=result.reason,
         )
-        self._answer(bus, drive, command_id, action, _result(Outcome.INVALID, reason))
+        self._answer(bus, drive, command_id, action, result)
 
     def _answer(
         self, bus: str, drive: str, command_id: Any, action: str | None, result: CommandResult

@@ -147,10 +147,10 @@ def test_mqtt_settings_are_checked_with_their_key_path(
 
 def test_names_that_cannot_be_topic_levels_are_config_errors() -> None:
     text = "buses: [{name: 'a/b', port: sim://x, drives: [{name: 'p+1', address: 1}]}]\n"
-    parse(text)  # without MQTT, the names are fine
-    with pytest.raises(ConfigError) as caught:
-        parse(text + "mqtt: {}\n")
-    assert [where for where, _ in caught.value.problems] == [
-        "buses[0].name",
-        "buses[0].drives[0].name",
-    ]
+    for tail in ("", "mqtt: {}\n"):  # with MQTT or without: every surface must address them
+        with pytest.raises(ConfigError) as caught:
+            parse(text + tail)
+        assert [where for where, _ in caught.value.problems] == [
+            "buses[0].name",
+            "buses[0].drives[0].name",
+        ]

@@ -1,3 +1,4 @@
+import json
 import textwrap
 from pathlib import Path
 
@@ -183,3 +184,26 @@ def test_a_missing_file_is_a_config_error(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as info:
         load(tmp_path / "absent.yaml")
     assert "cannot read" in info.value.problems[0][1]
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["sl/ash", "a+b", "a#b", "two words", "tab\there", "..", ".hidden", "50%", "é", "x" * 65],
+)
+def test_a_name_no_surface_can_address_is_refused(name: str) -> None:
+    drive = f"{{name: {json.dumps(name)}, address: 1}}"
+    text = f"buses: [{{name: line1, port: sim://x, drives: [{drive}]}}]"
+    with pytest.raises(ConfigError) as caught:
+        parse(text)
+    [(where, why)] = caught.value.problems
+    assert where == "buses[0].drives[0].name"
+    assert "cannot be addressed over HTTP and MQTT" in why
+
+
+@pytest.mark.parametrize("name", ["pump-1", "Line_2", "fan.3", "7", "a" * 64])
+def test_plain_names_are_addressable(name: str) -> None:
+    quoted = json.dumps(name)
+    config = parse(
+        f"buses: [{{name: {quoted}, port: sim://x, drives: [{{name: {quoted}, address: 1}}]}}]"
+    )
+    assert (config.lines[0].name, config.lines[0].drives[0].name) == (name, name)
