@@ -15,9 +15,11 @@ dataclasses; nothing below ``service`` ever sees pydantic.
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -29,11 +31,13 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    TypeAdapter,
     ValidationError,
     field_validator,
     model_validator,
 )
 
+from fcmaster.adapters.auth import listen_problem
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.errors import ConfigError, UsageError
@@ -280,20 +284,84 @@ def parse(
         raise ConfigError([(where, f"not valid YAML: {getattr(exc, 'problem', exc)}")]) from exc
     if not isinstance(data, dict):
         raise ConfigError([("(top)", "the file must be a mapping with a 'buses' list")])
+    unset: list[tuple[str, str]] = []
+    data = _substitute(data, "", os.environ if env is None else env, unset)
     problems: list[tuple[str, str]] = []
-    data = _substitute(data, "", os.environ if env is None else env, problems)
     if buses_only:  # stand-ins long enough to pass validation; never used
-        problems = [p for p in problems if p[0] == "buses" or p[0].startswith(("buses.", "buses["))]
-    if problems:
-        raise ConfigError(problems)
+        unset = [p for p in unset if p[0] == "buses" or p[0].startswith(("buses.", "buses["))]
+    lines: tuple[LinePlan, ...] = ()
     try:
         model = ConfigModel.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError([_describe(error) for error in exc.errors()]) from None
-    lines = _check(model, problems)
+        problems = [_describe(error) for error in exc.errors()]
+        # Check the meaning of whatever parts are well-formed too, so that a wrong type in
+        # one bus does not hide an address out of range in another until it is fixed.
+        salvaged = _salvage(data)
+        if salvaged is not None:
+            partial, renumber = salvaged
+            more: list[tuple[str, str]] = []
+            _check(partial, more)
+            problems += [(renumber(path), renumber(reason)) for path, reason in more]
+    else:
+        lines = _check(model, problems)
+    if unset:  # what an unset variable left empty is not a problem of its own
+        blank = {where for where, _ in unset}
+        problems = unset + [(where, why) for where, why in problems if where not in blank]
     if problems:
         raise ConfigError(problems)
     return Config(lines=lines, model=model, path=path)
+
+
+_DRIVE_PATH = re.compile(r"\bbuses\[(\d+)\](?:\.drives\[(\d+)\])?")
+
+
+def _salvage(data: dict[str, Any]) -> tuple[ConfigModel, Callable[[str], str]] | None:
+    """The well-formed parts of a file that failed validation, and where they came from.
+
+    The function maps a key path in the parts back to the file's own (the buses and drives
+    kept are renumbered).
+    """
+    buses = data.get("buses")
+    if not isinstance(buses, list):
+        return None
+    kept: list[BusModel] = []
+    where: list[tuple[int, list[int]]] = []  # per kept bus: its index, its drives' indices
+    for b, bus in enumerate(buses):
+        if not isinstance(bus, dict):
+            continue
+        drives = bus.get("drives", [])
+        good = [d for d, drive in enumerate(drives) if _valid(DriveModel, drive)]
+        try:
+            kept.append(BusModel.model_validate({**bus, "drives": [drives[d] for d in good]}))
+        except (ValidationError, TypeError):
+            continue
+        where.append((b, good))
+    sections: dict[str, Any] = {}
+    for name, field in ConfigModel.model_fields.items():
+        if name != "buses" and name in data:
+            with contextlib.suppress(ValidationError):  # reported already: its rules wait
+                sections[name] = TypeAdapter[Any](field.annotation or Any).validate_python(
+                    data[name]
+                )
+    partial = ConfigModel.model_construct(buses=kept, **sections)
+
+    def original(match: re.Match[str]) -> str:
+        b, goods = where[int(match[1])]
+        drive = "" if match[2] is None else f".drives[{goods[int(match[2])]}]"
+        return f"buses[{b}]{drive}"
+
+    def renumber(text: str) -> str:
+        return _DRIVE_PATH.sub(original, text)
+
+    return partial, renumber
+
+
+def _valid(model: type[BaseModel], value: Any) -> bool:
+    try:
+        model.model_validate(value)
+    except ValidationError:
+        return False
+    return True
 
 
 def _substitute(value: Any, path: str, env: Any, problems: list[tuple[str, str]]) -> Any:
@@ -415,7 +483,23 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                     "(e.g. [10.0.5.0/24]) or listen on 127.0.0.1",
                 )
             )
+    for b, bus in enumerate(model.buses):
+        if bus.port.startswith("sim://"):  # what `run` builds the simulated line from
+            from fcmaster.sim.service import sim_settings
+
+            try:
+                sim_settings(lines[b], bus.simulation or {})
+            except ConfigError as exc:
+                problems.extend(exc.problems)
+    if model.mqtt is not None and model.mqtt.tls is not None:
+        for key in ("ca", "cert", "key"):
+            file = getattr(model.mqtt.tls, key)
+            if file is not None and not os.access(file, os.R_OK):
+                problems.append((f"mqtt.tls.{key}", f"cannot read {file}"))
     if model.http is not None:
+        problem = listen_problem(model.http.listen, has_tokens=bool(model.http.tokens))
+        if problem:  # the rule `run` applies as it starts the API
+            problems.append(("http.listen", problem))
         secrets: dict[str, str] = {}
         for t, token in enumerate(model.http.tokens):
             path = f"http.tokens[{t}].token"

@@ -31,7 +31,13 @@ import structlog
 import uvicorn
 
 from fcmaster.adapters.api import MAX_BODY_BYTES, create_app
-from fcmaster.adapters.auth import Authenticator, Role, is_loopback_host, split_host_port
+from fcmaster.adapters.auth import (
+    DEFAULT_PORT,
+    Authenticator,
+    Role,
+    listen_problem,
+    parse_listen,
+)
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.stream import StreamRegistry
 from fcmaster.config import HttpModel
@@ -39,25 +45,10 @@ from fcmaster.errors import ConfigError
 
 log = structlog.get_logger("fcmaster.adapters.http")
 
-DEFAULT_PORT = 8080
+__all__ = ["DEFAULT_PORT", "HttpAdapter", "parse_listen"]
 SHUTDOWN_GRACE_S = 2  # requests in progress (a command awaiting its result) may finish
 MAX_CONNECTIONS = 256  # beyond this uvicorn answers 503: bounded memory whatever happens
 DEMO_TOKEN_NAME = "demo-operator"
-
-
-def parse_listen(text: str) -> tuple[str, int]:
-    """``"127.0.0.1:8080"``, ``"[::1]:8080"``, ``"0.0.0.0"`` → host and port (8080)."""
-    stripped = text.strip()
-    if stripped.startswith("["):
-        raw = stripped.rpartition("]:")[2] if "]:" in stripped else None
-    else:
-        raw = stripped.partition(":")[2] if stripped.count(":") == 1 else None
-    host, port = split_host_port(stripped)
-    if not host or (raw is not None and not raw.isdigit()):
-        raise ConfigError([("http.listen", f"{text!r} is not like 127.0.0.1:8080")])
-    if port is not None and port > 65535:
-        raise ConfigError([("http.listen", f"port {port} is beyond 65535")])
-    return host, DEFAULT_PORT if port is None else port
 
 
 class _Server(uvicorn.Server):
@@ -114,12 +105,9 @@ class HttpAdapter:
 
     def _authenticator(self, host: str) -> Authenticator:
         tokens = [(t.name, Role[t.role.upper()], t.token) for t in self.model.tokens]
-        if not tokens and not is_loopback_host(host):
-            reason = (
-                f"{self.model.listen} is not a loopback address: with no http.tokens the API is "
-                "read-only and served on loopback only; listen on 127.0.0.1 or add tokens"
-            )
-            raise ConfigError([("http.listen", reason)])
+        problem = listen_problem(self.model.listen, has_tokens=bool(tokens))
+        if problem:  # `check` refuses it too; --http-listen can still bring it here
+            raise ConfigError([("http.listen", problem)])
         if self.demo:
             self.operator_token = secrets.token_urlsafe(24)
             tokens.append((DEMO_TOKEN_NAME, Role.OPERATOR, self.operator_token))

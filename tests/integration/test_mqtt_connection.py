@@ -12,7 +12,7 @@ import pytest
 from structlog.testing import capture_logs
 
 from fcmaster.adapters.mqtt import MqttAdapter
-from fcmaster.config import parse
+from fcmaster.config import MqttModel, TlsModel, parse
 from fcmaster.errors import ConfigError
 from fcmaster.service import Service
 from tests.integration.mosquitto import Broker, Recorder, payload_text
@@ -112,12 +112,13 @@ async def test_tls_with_a_ca_and_a_client_certificate(tmp_path: Path) -> None:
 
 
 def test_unreadable_certificates_are_a_config_error(tmp_path: Path) -> None:
-    config = parse(
-        CONFIG.replace("URL", "mqtts://127.0.0.1:8883") + f"  tls: {{ca: {tmp_path / 'none'}}}\n"
-    )
-    assert config.model.mqtt is not None
+    missing = tmp_path / "none"
+    with pytest.raises(ConfigError) as caught:  # `check` says so, as `run` would
+        parse(CONFIG.replace("URL", "mqtts://127.0.0.1:8883") + f"  tls: {{ca: {missing}}}\n")
+    assert caught.value.problems == [("mqtt.tls.ca", f"cannot read {missing}")]
+    model = MqttModel(url="mqtts://127.0.0.1:8883", tls=TlsModel(ca=str(missing)))
     with pytest.raises(ConfigError, match=r"mqtt\.tls"):
-        MqttAdapter(config.model.mqtt, FakeGateway())
+        MqttAdapter(model, FakeGateway())
 
 
 @pytest.mark.parametrize(

@@ -207,3 +207,59 @@ def test_plain_names_are_addressable(name: str) -> None:
         f"buses: [{{name: {quoted}, port: sim://x, drives: [{{name: {quoted}, address: 1}}]}}]"
     )
     assert (config.lines[0].name, config.lines[0].drives[0].name) == (name, name)
+
+
+def test_problems_in_several_buses_and_sections_are_reported_in_one_pass() -> None:
+    text = textwrap.dedent(
+        """\
+        buses:
+          - name: hall
+            port: /dev/ttyUSB0
+            protocol: profibus
+          - name: roof
+            port: /dev/ttyUSB1
+            drives:
+              - {name: fan-1, address: 200}
+              - {name: fan-2, address: 2, colour: red}
+              - {name: fan-1, address: 3, monitor: [bogus]}
+          - name: sl/ash
+            port: ${FCM_TEST_UNSET}
+            baudrate: fast
+            drives:
+              - {name: mixer, address: 4, min_frequency_hz: 60}
+          - name: yard
+            port: /dev/ttyUSB2
+            drives:
+              - {name: fan-9, address: 0}
+        http: {listen: 0.0.0.0:8080}
+        mqtt: {url: "http://broker"}
+        """
+    )
+    with pytest.raises(ConfigError) as caught:
+        parse(text, env={})
+    problems = dict(caught.value.problems)
+    assert problems.pop("buses[2].port") == "environment variable FCM_TEST_UNSET is not set"
+    assert "is not one of" in problems.pop("buses[0].protocol")
+    assert problems.pop("buses[1].drives[1].colour") == "unknown key"
+    assert "input should be a valid integer" in problems.pop("buses[2].baudrate")
+    assert "mqtt.url" in " ".join(problems)
+    problems = {k: v for k, v in problems.items() if not k.startswith("mqtt")}
+    # the meaning of the well-formed parts, in the same pass
+    assert problems == {
+        "buses[1].drives[0].address": "200 is outside 1-126",
+        "buses[1].drives[2].name": "drive name 'fan-1' is already used at buses[1].drives[0].name",
+        "buses[1].drives[2].monitor[0]": problems["buses[1].drives[2].monitor[0]"],
+        "buses[3].drives[0].address": "0 is outside 1-126",
+        "http.listen": (
+            "0.0.0.0:8080 is not a loopback address: with no http.tokens the API is read-only "
+            "and served on loopback only; listen on 127.0.0.1 or add tokens"
+        ),
+    }
+    assert "bogus" in problems["buses[1].drives[2].monitor[0]"]
+
+
+def test_a_simulation_section_run_would_refuse_is_refused_by_the_check() -> None:
+    text = "buses: [{name: sim1, port: sim://sim1, simulation: {colour: red}}]\n"
+    with pytest.raises(ConfigError) as caught:
+        parse(text)
+    assert caught.value.problems == [("buses.sim1.simulation.colour", "unknown key")]
