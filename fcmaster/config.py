@@ -140,6 +140,10 @@ class MqttModel(_Model):
     keepalive_s: int = Field(default=30, ge=5, le=3600)
     reconnect_min_s: float = Field(default=1.0, gt=0)
     reconnect_max_s: float = Field(default=60.0, gt=0)
+    # Commands over MQTT: off unless switched on; then each payload carries an operator
+    # token of http.tokens ("token"), unless the broker's ACLs alone decide who may publish.
+    commands: bool = False
+    trust_broker: bool = False
 
     @field_validator("url")
     @classmethod
@@ -496,6 +500,18 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
             file = getattr(model.mqtt.tls, key)
             if file is not None and not os.access(file, os.R_OK):
                 problems.append((f"mqtt.tls.{key}", f"cannot read {file}"))
+    mqtt = model.mqtt
+    if mqtt is not None and mqtt.commands and not mqtt.trust_broker:
+        operators = [t for t in (model.http.tokens if model.http else ()) if t.role == "operator"]
+        if not operators:
+            problems.append(
+                (
+                    "mqtt.commands",
+                    "each MQTT command must carry an operator token of http.tokens, and there "
+                    "is none: add one, or set mqtt.trust_broker: true if the broker's ACLs "
+                    "alone decide who may publish commands",
+                )
+            )
     if model.http is not None:
         problem = listen_problem(model.http.listen, has_tokens=bool(model.http.tokens))
         if problem:  # the rule `run` applies as it starts the API

@@ -246,6 +246,11 @@ class Service:
             options["metrics_enabled"] = metrics is not None and metrics.enabled
         if target == ADAPTERS["modbus"]:  # unit ids and monitored values come from the lines
             options["config"] = self.config
+        if target == ADAPTERS["mqtt"]:  # MQTT commands carry the tokens of http.tokens
+            http = self.config.model.http
+            options["tokens"] = tuple(
+                (t.name, t.role, t.token) for t in (http.tokens if http else ())
+            )
         factory = getattr(importlib.import_module(module), name)
         adapter: AbstractAsyncContextManager[Any] = factory(model, self, **options)
         return adapter

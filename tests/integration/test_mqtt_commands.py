@@ -28,7 +28,7 @@ buses:
     drives:
       - {name: pump-1, address: 1, control: bus, max_frequency_hz: 40}
       - {name: fan-2, address: 2}
-mqtt: {url: URL, reconnect_min_s: 0.05}
+mqtt: {url: URL, reconnect_min_s: 0.05, commands: true, trust_broker: true}
 """
 PUMP = "fcmaster/line1/pump-1/command"
 
@@ -40,7 +40,7 @@ async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
 
 
 def model(broker: Broker) -> MqttModel:
-    return MqttModel(url=broker.url, reconnect_min_s=0.05)
+    return MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True, trust_broker=True)
 
 
 async def test_commands_reach_the_simulated_drive_and_answer_with_their_id(
