@@ -122,7 +122,13 @@ class MqttAdapter:
             if not name or set(name) & {"/", "+", "#"}:
                 raise ConfigError([("mqtt", f"{name!r} cannot be an MQTT topic level")])
         self._discovery = (
-            Discovery(self._topics, model.discovery_prefix) if model.discovery else None
+            Discovery(
+                self._topics,
+                model.discovery_prefix,
+                controls=model.commands and model.trust_broker,
+            )
+            if model.discovery
+            else None
         )
         self._discovered: set[tuple[str, str]] = set()
         self._outbox = Outbox()
