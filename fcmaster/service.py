@@ -210,6 +210,11 @@ class Service:
                         observer=self.fleet,
                     )
                     self.masters[plan.name] = await stack.enter_async_context(master)
+                    serial = self._serial_ports.get(plan.name)
+                    if serial is not None and serial.in_use is not None:
+                        # Another fcmaster (or a tool) runs this line: a second master would
+                        # only garble both. Unlike a missing adapter, this is not waited out.
+                        raise serial.in_use
                 for section, target in ADAPTERS.items():
                     model = getattr(self.config.model, section)
                     if model is not None:
