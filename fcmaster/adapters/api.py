@@ -35,6 +35,7 @@ from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.middleware import (
     BodyLimit,
     SecurityHeaders,
+    StopsOnly,
     error_body,
     json_response,
     states_json,
@@ -381,6 +382,7 @@ def create_app(
             allow_methods=["GET", "POST", "PUT"],
             allow_headers=["Authorization", "Content-Type"],
         )
+    app.add_middleware(StopsOnly)
     app.add_middleware(BodyLimit, limit=MAX_BODY_BYTES)
     return app
 

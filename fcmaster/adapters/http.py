@@ -39,6 +39,7 @@ from fcmaster.adapters.auth import (
     parse_listen,
 )
 from fcmaster.adapters.gateway import Gateway
+from fcmaster.adapters.http_guard import HEAD_TIMEOUT_S, ConnectionGuard, guarded_protocol
 from fcmaster.adapters.stream import StreamRegistry
 from fcmaster.config import HttpModel
 from fcmaster.errors import ConfigError
@@ -47,7 +48,6 @@ log = structlog.get_logger("fcmaster.adapters.http")
 
 __all__ = ["DEFAULT_PORT", "HttpAdapter", "parse_listen"]
 SHUTDOWN_GRACE_S = 2  # requests in progress (a command awaiting its result) may finish
-MAX_CONNECTIONS = 256  # beyond this uvicorn answers 503: bounded memory whatever happens
 DEMO_TOKEN_NAME = "demo-operator"
 
 
@@ -90,6 +90,7 @@ class HttpAdapter:
         self.metrics_enabled = metrics_enabled
         self.operator_token: str | None = None  # the demo's, once entered
         self._streams = StreamRegistry()
+        self.guard = ConnectionGuard()
         self._server: _Server | None = None
         self._task: asyncio.Task[None] | None = None
         self._socket: socket.socket | None = None
@@ -144,7 +145,8 @@ class HttpAdapter:
             ws_max_size=MAX_BODY_BYTES,
             proxy_headers=False,  # the peer address decides loopback, not X-Forwarded-For
             server_header=False,
-            limit_concurrency=MAX_CONNECTIONS,
+            http=guarded_protocol(self.guard),  # timeouts, caps, a reserve for stops
+            timeout_keep_alive=int(HEAD_TIMEOUT_S),
             timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
         )
         self._socket = self._bind(host, port)
