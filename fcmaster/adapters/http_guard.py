@@ -21,7 +21,7 @@ with a :class:`ConnectionGuard` around it:
   :data:`HEAD_TIMEOUT_S` while the server is full: a flood that reconnects at once does
   not churn an operator's new connection out before its request is read.
 
-- **a reserve**: when every connection carries a request in progress, up to
+- **a reserve**: when every connection carries a request in progress (none is idle), up to
   :data:`RESERVE` more are taken, and requests on those are served only if they are a
   stop, coast or quick_stop (:data:`RESERVE_KEY` in the request's ``state``; the API
   answers anything else 503). Beyond that, a new connection is closed at once.
@@ -100,12 +100,18 @@ class ConnectionGuard:
             self.refused += 1
             return False
         reserved = False
-        full = len(self.open) >= self.max_connections
-        if full and (self._penalised(host) or not self._evict(None)):
-            if len(self.open) >= self.max_connections + self.reserve:
+        if len(self.open) >= self.max_connections:
+            if self.idle:  # make room, unless this address just lost an idle one itself
+                if self._penalised(host) or not self._evict(None):
+                    self.refused += 1
+                    return False
+                # in the place of a reserve connection, it is one too
+                reserved = len(self.open) >= self.max_connections
+            elif len(self.open) < self.max_connections + self.reserve:
+                reserved = True  # every connection is busy: this one takes stops only
+            else:
                 self.refused += 1
                 return False
-            reserved = True
         self.open[conn] = host
         self.per_host[host] = self.per_host.get(host, 0) + 1
         self.idle[conn] = None
@@ -157,6 +163,7 @@ class GuardedProtocol(H11Protocol):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.reserved = False
+        self.answered = 0  # requests answered on this connection
         self._deadline: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
@@ -190,6 +197,7 @@ class GuardedProtocol(H11Protocol):
     def on_response_complete(self) -> None:
         """Answered: wait for the next request head (or close when none comes in time)."""
         super().on_response_complete()
+        self.answered += 1
         if not self.transport.is_closing() and (self.cycle is None or self.cycle.response_complete):
             self.guard.waiting(self)
             self._expect_head()
@@ -214,7 +222,8 @@ class GuardedProtocol(H11Protocol):
         self._deadline = None
         if self.cycle is None or self.cycle.response_complete:
             self.guard.timed_out += 1
-            self.guard.penalise(self.client[0] if self.client else "?")
+            if not self.answered:  # held without asking anything (not a keep-alive ending)
+                self.guard.penalise(self.client[0] if self.client else "?")
             self.close_now()
 
     def _body_late(self) -> None:

@@ -142,3 +142,33 @@ def test_commands_with_tokens_need_an_operator_token_configured() -> None:
     assert where == "mqtt.commands"
     assert "trust_broker" in why
     parse(text.replace("commands: true", "commands: true, trust_broker: true"))
+
+
+SLOW = """
+buses:
+  - name: line1
+    port: sim://line1
+    baudrate: 115200
+    response_delay_ms: 400
+    drives:
+      - {name: pump-1, address: 1, control: bus}
+      - {name: pump-2, address: 2, control: bus}
+      - {name: pump-3, address: 3, control: bus}
+    simulation: {response_delay_ms: 300}
+mqtt: {url: URL, reconnect_min_s: 0.05, commands: true, trust_broker: true}
+on_shutdown: stop
+"""
+
+
+async def test_a_command_in_the_stop_phase_gets_a_cancelled_result(broker: Broker) -> None:
+    service = Service(parse(SLOW.replace("URL", broker.url)))
+    async with asyncio.timeout(LIMIT_S * 2), Recorder(broker, "fcmaster/#") as client:
+        running = asyncio.create_task(service.run(install_signals=False))
+        for n in (1, 2, 3):
+            await client.wait_json(f"fcmaster/line1/pump-{n}/state", lambda s: s["online"])
+        await client.wait("fcmaster/status")
+        service.stop()  # three stops at 300 ms each: the stop phase lasts about a second
+        result = await client.command(PUMP, {"id": "late", "action": "start"})
+        await running
+    assert result["outcome"] == "cancelled"
+    assert result["reason"] == "fcmaster is shutting down"
