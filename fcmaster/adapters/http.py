@@ -191,6 +191,7 @@ class HttpAdapter:
         server, task, sock = self._server, self._task, self._socket
         if server is None or task is None:
             return
+        log.info("http.closing")
         try:
             self._streams.close_all()
             server.should_exit = True

@@ -47,6 +47,7 @@ HEAD_TIMEOUT_S: Final = 5.0  # a whole request head, from connecting or the last
 BODY_TIMEOUT_S: Final = 10.0  # a request's body, from its head
 MAX_CONNECTIONS: Final = 256  # HTTP connections in all (WebSocket streams count apart)
 PER_CLIENT: Final = 64  # connections from one address
+SHUTDOWN_HEAD_S: Final = 0.5  # stopping: a request already on its way is still read
 RESERVE: Final = 16  # beyond MAX_CONNECTIONS, for stops only, when none is idle
 MAX_PENALTIES: Final = 4096  # addresses remembered for holding connections idle
 RESERVE_KEY: Final = "fcmaster.reserve"  # in a request's scope["state"]: stops only
@@ -164,6 +165,7 @@ class GuardedProtocol(H11Protocol):
         super().__init__(*args, **kwargs)
         self.reserved = False
         self.answered = 0  # requests answered on this connection
+        self.closing = False  # the server is stopping
         self._deadline: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
@@ -188,6 +190,8 @@ class GuardedProtocol(H11Protocol):
         cycle = self.cycle
         if cycle is not None and cycle is not had and not cycle.response_complete:
             self.guard.busy(self)
+            if self.closing:
+                cycle.keep_alive = False
             if self.reserved:
                 cycle.scope.setdefault("state", {})[RESERVE_KEY] = True
             self._cancel_deadline()
@@ -200,7 +204,29 @@ class GuardedProtocol(H11Protocol):
         self.answered += 1
         if not self.transport.is_closing() and (self.cycle is None or self.cycle.response_complete):
             self.guard.waiting(self)
-            self._expect_head()
+            if self.closing:
+                self._shut()
+            else:
+                self._expect_head()
+
+    def shutdown(self) -> None:
+        """The server stops: a request already on its way is still read and answered.
+
+        uvicorn would close a connection without a request in progress at once, and a
+        client whose request was in flight then gets no answer at all; here it gets
+        :data:`SHUTDOWN_HEAD_S` to arrive (and is answered, "shutting down"), then closes.
+        """
+        self.closing = True
+        if self.cycle is None or self.cycle.response_complete:
+            self._cancel_deadline()
+            self._deadline = self.loop.call_later(SHUTDOWN_HEAD_S, self._shut)
+        else:
+            super().shutdown()
+
+    def _shut(self) -> None:
+        self._deadline = None
+        if not self.transport.is_closing():
+            super().shutdown()
 
     def handle_websocket_upgrade(self, event: h11.Request) -> None:
         """A WebSocket stream is counted by the stream registry, not here."""
