@@ -489,10 +489,11 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
             )
     for b, bus in enumerate(model.buses):
         if bus.port.startswith("sim://"):  # what `run` builds the simulated line from
-            from fcmaster.sim.service import sim_settings
+            from fcmaster.clock import MonotonicClock
+            from fcmaster.sim.service import sim_line
 
-            try:
-                sim_settings(lines[b], bus.simulation or {})
+            try:  # built as `run` builds it: settings a simulated drive cannot take too
+                sim_line(lines[b], bus.simulation or {}, clock=MonotonicClock())
             except ConfigError as exc:
                 problems.extend(exc.problems)
     if model.mqtt is not None and model.mqtt.tls is not None:

@@ -263,3 +263,11 @@ def test_a_simulation_section_run_would_refuse_is_refused_by_the_check() -> None
     with pytest.raises(ConfigError) as caught:
         parse(text)
     assert caught.value.problems == [("buses.sim1.simulation.colour", "unknown key")]
+    drive = "drives: [{name: d1, address: 1}]"
+    simulation = "simulation: {response_delay_ms: 1}"  # 8-35 takes 5-10000 ms
+    text = f"buses: [{{name: sim1, port: sim://sim1, {drive}, {simulation}}}]"
+    with pytest.raises(ConfigError) as caught:
+        parse(text)
+    [(where, why)] = caught.value.problems
+    assert where == "buses.sim1.simulation"
+    assert "8-35" in why
