@@ -25,7 +25,6 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect
-from starlette.types import Message
 
 from fcmaster import __version__
 from fcmaster.adapters import metrics
@@ -38,6 +37,7 @@ from fcmaster.adapters.middleware import (
     StopsOnly,
     error_body,
     json_response,
+    replaying,
     states_json,
 )
 from fcmaster.adapters.readlimit import ReadsBusy, ViewerReads
@@ -157,11 +157,9 @@ class _StrictJsonRoute(APIRoute):
         async def strict(request: Request) -> Response:
             # Read through ``request``, which caches the body for the error handlers.
             body = await request.body()
-
-            async def replay() -> Message:
-                return {"type": "http.request", "body": body, "more_body": False}
-
-            response: Response = await handler(_StrictJsonRequest(request.scope, replay))
+            response: Response = await handler(
+                _StrictJsonRequest(request.scope, replaying(body, request.receive))
+            )
             return response
 
         return strict

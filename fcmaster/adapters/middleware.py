@@ -111,17 +111,27 @@ class StopsOnly:
             except (ValueError, HTTPException):  # not JSON, or too large
                 payload = None
             if isinstance(payload, dict) and payload.get("action") in self.URGENT:
-
-                async def replay() -> Message:
-                    return {"type": "http.request", "body": body, "more_body": False}
-
-                await self.app(scope, replay, send)
+                await self.app(scope, replaying(body, receive), send)
                 return
         reason = "the server is at its connection limit: only stop, coast and quick_stop are taken"
         response = json_response(
             {"outcome": "cancelled", **error_body(reason)}, 503, headers={"Retry-After": "1"}
         )
         await response(scope, receive, send)
+
+
+def replaying(body: bytes, receive: Receive) -> Receive:
+    """A ``receive`` that hands over ``body`` (already read) once, then ``receive``'s own."""
+    given = False
+
+    async def replay() -> Message:
+        nonlocal given
+        if given:
+            return await receive()
+        given = True
+        return {"type": "http.request", "body": body, "more_body": False}
+
+    return replay
 
 
 class SecurityHeaders:
