@@ -334,6 +334,8 @@ def _salvage(data: dict[str, Any]) -> tuple[ConfigModel, Callable[[str], str]] |
         if not isinstance(bus, dict):
             continue
         drives = bus.get("drives", [])
+        if not isinstance(drives, list):
+            drives = []  # reported already: the bus's other keys can still be checked
         good = [d for d, drive in enumerate(drives) if _valid(DriveModel, drive)]
         try:
             kept.append(BusModel.model_validate({**bus, "drives": [drives[d] for d in good]}))

@@ -271,3 +271,20 @@ def test_a_simulation_section_run_would_refuse_is_refused_by_the_check() -> None
     [(where, why)] = caught.value.problems
     assert where == "buses.sim1.simulation"
     assert "8-35" in why
+
+
+@pytest.mark.parametrize(
+    "buses",
+    [
+        "[5, {name: b, port: /dev/ttyUSB1, drives: [{name: x, address: 200}]}]",
+        "[{name: a, port: /dev/ttyUSB0, drives: 5}, "
+        "{name: b, port: /dev/ttyUSB1, drives: [{name: x, address: 200}]}]",
+        "[{name: a, port: /dev/ttyUSB0, drives: [7, {name: y, address: 300}]}]",
+    ],
+)
+def test_odd_shapes_are_reported_with_the_meaning_of_the_rest(buses: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        parse(f"buses: {buses}\n")
+    paths = [path for path, _ in caught.value.problems]
+    assert len(paths) == 2
+    assert any(path.endswith(".address") for path in paths)
