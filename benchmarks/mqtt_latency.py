@@ -189,7 +189,9 @@ async def measure(count: int, drives: int, baudrate: int, *, nodelay: bool) -> N
         async with mosquitto(Path(directory), nodelay=nodelay) as port:
             running = asyncio.create_task(service.run(install_signals=False))
             gateway = TapGateway(service)
-            adapter = MqttAdapter(MqttModel(url=f"mqtt://127.0.0.1:{port}"), gateway)
+            adapter = MqttAdapter(
+                MqttModel(url=f"mqtt://127.0.0.1:{port}", commands=True, trust_broker=True), gateway
+            )
             async with adapter, aiomqtt.Client("127.0.0.1", port, socket_options=NODELAY) as client:
                 await adapter.connected.wait()
                 await client.subscribe("fcmaster/line1/d1/command/result", qos=1)

@@ -15,9 +15,11 @@ dataclasses; nothing below ``service`` ever sees pydantic.
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -29,11 +31,13 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    TypeAdapter,
     ValidationError,
     field_validator,
     model_validator,
 )
 
+from fcmaster.adapters.auth import listen_problem
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.errors import ConfigError, UsageError
@@ -136,6 +140,10 @@ class MqttModel(_Model):
     keepalive_s: int = Field(default=30, ge=5, le=3600)
     reconnect_min_s: float = Field(default=1.0, gt=0)
     reconnect_max_s: float = Field(default=60.0, gt=0)
+    # Commands over MQTT: off unless switched on; then each payload carries an operator
+    # token of http.tokens ("token"), unless the broker's ACLs alone decide who may publish.
+    commands: bool = False
+    trust_broker: bool = False
 
     @field_validator("url")
     @classmethod
@@ -280,20 +288,86 @@ def parse(
         raise ConfigError([(where, f"not valid YAML: {getattr(exc, 'problem', exc)}")]) from exc
     if not isinstance(data, dict):
         raise ConfigError([("(top)", "the file must be a mapping with a 'buses' list")])
+    unset: list[tuple[str, str]] = []
+    data = _substitute(data, "", os.environ if env is None else env, unset)
     problems: list[tuple[str, str]] = []
-    data = _substitute(data, "", os.environ if env is None else env, problems)
     if buses_only:  # stand-ins long enough to pass validation; never used
-        problems = [p for p in problems if p[0] == "buses" or p[0].startswith(("buses.", "buses["))]
-    if problems:
-        raise ConfigError(problems)
+        unset = [p for p in unset if p[0] == "buses" or p[0].startswith(("buses.", "buses["))]
+    lines: tuple[LinePlan, ...] = ()
     try:
         model = ConfigModel.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError([_describe(error) for error in exc.errors()]) from None
-    lines = _check(model, problems)
+        problems = [_describe(error) for error in exc.errors()]
+        # Check the meaning of whatever parts are well-formed too, so that a wrong type in
+        # one bus does not hide an address out of range in another until it is fixed.
+        salvaged = _salvage(data)
+        if salvaged is not None:
+            partial, renumber = salvaged
+            more: list[tuple[str, str]] = []
+            _check(partial, more)
+            problems += [(renumber(path), renumber(reason)) for path, reason in more]
+    else:
+        lines = _check(model, problems)
+    if unset:  # what an unset variable left empty is not a problem of its own
+        blank = {where for where, _ in unset}
+        problems = unset + [(where, why) for where, why in problems if where not in blank]
     if problems:
         raise ConfigError(problems)
     return Config(lines=lines, model=model, path=path)
+
+
+_DRIVE_PATH = re.compile(r"\bbuses\[(\d+)\](?:\.drives\[(\d+)\])?")
+
+
+def _salvage(data: dict[str, Any]) -> tuple[ConfigModel, Callable[[str], str]] | None:
+    """The well-formed parts of a file that failed validation, and where they came from.
+
+    The function maps a key path in the parts back to the file's own (the buses and drives
+    kept are renumbered).
+    """
+    buses = data.get("buses")
+    if not isinstance(buses, list):
+        return None
+    kept: list[BusModel] = []
+    where: list[tuple[int, list[int]]] = []  # per kept bus: its index, its drives' indices
+    for b, bus in enumerate(buses):
+        if not isinstance(bus, dict):
+            continue
+        drives = bus.get("drives", [])
+        if not isinstance(drives, list):
+            drives = []  # reported already: the bus's other keys can still be checked
+        good = [d for d, drive in enumerate(drives) if _valid(DriveModel, drive)]
+        try:
+            kept.append(BusModel.model_validate({**bus, "drives": [drives[d] for d in good]}))
+        except (ValidationError, TypeError):
+            continue
+        where.append((b, good))
+    sections: dict[str, Any] = {}
+    for name, field in ConfigModel.model_fields.items():
+        if name != "buses" and name in data:
+            with contextlib.suppress(ValidationError):  # reported already: its rules wait
+                sections[name] = TypeAdapter[Any](field.annotation or Any).validate_python(
+                    data[name]
+                )
+    partial = ConfigModel.model_construct(buses=kept, **sections)
+
+    def original(match: re.Match[str]) -> str:
+        b, goods = where[int(match[1])]
+        drive = "" if match[2] is None else f".drives[{goods[int(match[2])]}]"
+        return f"buses[{b}]{drive}"
+
+    def renumber(text: str) -> str:
+        return _DRIVE_PATH.sub(original, text)
+
+    return partial, renumber
+
+
+def _valid(model: type[BaseModel], value: Any) -> bool:
+    try:
+        model.model_validate(value)
+    except ValidationError:
+        return False
+    return True
 
 
 def _substitute(value: Any, path: str, env: Any, problems: list[tuple[str, str]]) -> Any:
@@ -397,11 +471,12 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
             if bus.protocol != "mitsubishi" and key in bus.model_fields_set:
                 problems.append((f"{where}.{key}", "only mitsubishi lines have one"))
         lines.append(_line(bus, tuple(drives)))
-    if model.mqtt is not None:  # names are topic levels: {base}/{bus}/{drive}/state
-        for b, bus in enumerate(model.buses):
-            _topic_level(bus.name, f"buses[{b}].name", problems)
-            for d, drive in enumerate(bus.drives):
-                _topic_level(drive.name, f"buses[{b}].drives[{d}].name", problems)
+    # Names are HTTP path segments (/api/v1/drives/{name}) and MQTT topic levels
+    # ({base}/{bus}/{drive}/state) whichever surfaces are on today: a name must work on all.
+    for b, bus in enumerate(model.buses):
+        _addressable(bus.name, f"buses[{b}].name", problems)
+        for d, drive in enumerate(bus.drives):
+            _addressable(drive.name, f"buses[{b}].drives[{d}].name", problems)
     if model.modbus is not None:
         modbus_units(model, problems)
         host, _ = modbus_listen(model.modbus.listen)
@@ -414,7 +489,36 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                     "(e.g. [10.0.5.0/24]) or listen on 127.0.0.1",
                 )
             )
+    for b, bus in enumerate(model.buses):
+        if bus.port.startswith("sim://"):  # what `run` builds the simulated line from
+            from fcmaster.clock import MonotonicClock
+            from fcmaster.sim.service import sim_line
+
+            try:  # built as `run` builds it: settings a simulated drive cannot take too
+                sim_line(lines[b], bus.simulation or {}, clock=MonotonicClock())
+            except ConfigError as exc:
+                problems.extend(exc.problems)
+    if model.mqtt is not None and model.mqtt.tls is not None:
+        for key in ("ca", "cert", "key"):
+            file = getattr(model.mqtt.tls, key)
+            if file is not None and not os.access(file, os.R_OK):
+                problems.append((f"mqtt.tls.{key}", f"cannot read {file}"))
+    mqtt = model.mqtt
+    if mqtt is not None and mqtt.commands and not mqtt.trust_broker:
+        operators = [t for t in (model.http.tokens if model.http else ()) if t.role == "operator"]
+        if not operators:
+            problems.append(
+                (
+                    "mqtt.commands",
+                    "each MQTT command must carry an operator token of http.tokens, and there "
+                    "is none: add one, or set mqtt.trust_broker: true if the broker's ACLs "
+                    "alone decide who may publish commands",
+                )
+            )
     if model.http is not None:
+        problem = listen_problem(model.http.listen, has_tokens=bool(model.http.tokens))
+        if problem:  # the rule `run` applies as it starts the API
+            problems.append(("http.listen", problem))
         secrets: dict[str, str] = {}
         for t, token in enumerate(model.http.tokens):
             path = f"http.tokens[{t}].token"
@@ -500,9 +604,19 @@ def _unique(
         seen[value] = path
 
 
-def _topic_level(name: str, path: str, problems: list[tuple[str, str]]) -> None:
-    if any(char in name for char in "/+#"):
-        problems.append((path, f"{name!r} cannot be an MQTT topic level (no /, + or #)"))
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+
+
+def _addressable(name: str, path: str, problems: list[tuple[str, str]]) -> None:
+    """A drive or bus name every surface can address: no /, +, #, %, spaces, ``..``."""
+    if not _NAME.fullmatch(name):
+        problems.append(
+            (
+                path,
+                f"{name!r} cannot be addressed over HTTP and MQTT: use 1-64 letters, digits, "
+                "'-', '_' and '.', starting with a letter or digit",
+            )
+        )
 
 
 def _bad_address(bus: BusModel, address: int, codec: DriveCodec) -> str:

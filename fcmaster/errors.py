@@ -11,6 +11,7 @@ its facts as attributes, not only in the message::
     │   └── UnexpectedReply    from the wrong address, or of the wrong kind
     ├── BusError                                                                 (exit 1)
     │   ├── PortError          open/read/write failed (pyserial and OS errors mapped here)
+    │   │   └── PortInUse      another program holds the port
     │   └── ReplyTimeout       no valid frame before the deadline
     └── CommandError                                                             (exit 1)
         ├── ControlNotAllowed  monitor-only drive, or a value beyond its configured limits
@@ -69,6 +70,10 @@ class BusError(FcmasterError):
 
 class PortError(BusError):
     """Opening, reading or writing the port failed."""
+
+
+class PortInUse(PortError):
+    """Another program holds the port (it is opened exclusively)."""
 
 
 class ReplyTimeout(BusError):

@@ -8,10 +8,14 @@ and a BusMaster per line reporting to the fleet state. Each line owns its port a
 it by itself when it is lost, so one unplugged adapter never stops the other lines.
 ``sim://NAME`` ports get an in-process simulated line with the drives the config names.
 
-Shutdown (SIGTERM, SIGINT, or :meth:`Service.stop`) is orderly: with ``on_shutdown: stop``
-every ``control: bus`` drive is sent a stop and the service waits (bounded) for the
-results; with ``hold`` the drives are left as they are and their own control-word timeout
-acts. Then the lines close, and every command still queued ends ``cancelled``.
+Shutdown (SIGTERM, SIGINT, or :meth:`Service.stop`) is orderly. From that moment every
+surface's new command ends ``cancelled`` ("fcmaster is shutting down") in :meth:`execute`,
+and every queued command that is not a stop and not on the wire ends so too: the lines send
+nothing but what ``on_shutdown`` asks for. With ``stop`` every ``control: bus`` drive is sent
+a stop, which jumps every queue, and the service waits (bounded) for the results; with
+``hold`` the drives are left as they are and their own control-word timeout acts. Then the
+service waits (bounded) until every command still running has its outcome, so that each
+client gets its answer before the adapters close; then the lines close.
 
 Under systemd with ``Type=notify`` (``$NOTIFY_SOCKET`` set), the service says ``READY=1``
 once every line's port has been tried and every adapter is serving, and ``STOPPING=1``
@@ -48,6 +52,9 @@ log = structlog.get_logger("fcmaster.service")
 
 STATS_INTERVAL_S = 5.0
 SHUTDOWN_STOP_TIMEOUT_S = 5.0
+SHUTDOWN_COMMANDS_S = 5.0  # commands on the wire at shutdown: time to get their outcome
+SHUTDOWN_ACTOR = "shutdown"
+SHUTTING_DOWN = "fcmaster is shutting down"
 
 TransportFactory = Callable[[LinePlan], Transport]
 
@@ -99,6 +106,9 @@ class Service:
         self.masters: dict[str, BusMaster] = {}
         self._serial_ports: dict[str, SerialTransport] = {}  # by bus, for their adapters
         self._stopping = asyncio.Event()
+        self._running_commands = 0
+        self._no_commands = asyncio.Event()
+        self._no_commands.set()
 
     def _default_transport(self, plan: LinePlan) -> Transport:
         if plan.port.startswith("sim://"):
@@ -159,7 +169,25 @@ class Service:
             master = self.master_of(drive)
         except KeyError:
             return CommandResult(outcome=Outcome.INVALID, reason=f"no drive called {drive!r}")
-        return await master.execute(drive, command)
+        if self._stopping.is_set():
+            log.info(
+                "command.completed",
+                actor=command.actor or "-",
+                bus=master.plan.name,
+                drive=drive,
+                command=command.action.value,
+                outcome=Outcome.CANCELLED.value,
+                reason=SHUTTING_DOWN,
+            )
+            return CommandResult(outcome=Outcome.CANCELLED, reason=SHUTTING_DOWN)
+        self._running_commands += 1
+        self._no_commands.clear()
+        try:
+            return await master.execute(drive, command)
+        finally:
+            self._running_commands -= 1
+            if not self._running_commands:
+                self._no_commands.set()
 
     def stop(self) -> None:
         """Ask :meth:`run` to shut down."""
@@ -182,6 +210,11 @@ class Service:
                         observer=self.fleet,
                     )
                     self.masters[plan.name] = await stack.enter_async_context(master)
+                    serial = self._serial_ports.get(plan.name)
+                    if serial is not None and serial.in_use is not None:
+                        # Another fcmaster (or a tool) runs this line: a second master would
+                        # only garble both. Unlike a missing adapter, this is not waited out.
+                        raise serial.in_use
                 for section, target in ADAPTERS.items():
                     model = getattr(self.config.model, section)
                     if model is not None:
@@ -199,8 +232,11 @@ class Service:
                     stats.cancel()
                 log.info("service.stopping", on_shutdown=self.config.model.on_shutdown)
                 notify_systemd("STOPPING=1")
+                for master in self.masters.values():
+                    master.cancel_queued(SHUTTING_DOWN)
                 if self.config.model.on_shutdown == "stop":
                     await self._stop_drives()
+                await self._commands_ended()
         finally:
             if install_signals:
                 for sig in (signal.SIGTERM, signal.SIGINT):
@@ -215,6 +251,11 @@ class Service:
             options["metrics_enabled"] = metrics is not None and metrics.enabled
         if target == ADAPTERS["modbus"]:  # unit ids and monitored values come from the lines
             options["config"] = self.config
+        if target == ADAPTERS["mqtt"]:  # MQTT commands carry the tokens of http.tokens
+            http = self.config.model.http
+            options["tokens"] = tuple(
+                (t.name, t.role, t.token) for t in (http.tokens if http else ())
+            )
         factory = getattr(importlib.import_module(module), name)
         adapter: AbstractAsyncContextManager[Any] = factory(model, self, **options)
         return adapter
@@ -222,7 +263,7 @@ class Service:
     async def _stop_drives(self) -> None:
         """Send a stop to every bus-controlled drive and wait, bounded, for the results."""
         orders = [
-            master.execute(drive.name, Command(action=Action.STOP, actor="shutdown"))
+            master.execute(drive.name, Command(action=Action.STOP, actor=SHUTDOWN_ACTOR))
             for master in self.masters.values()
             for drive in master.plan.drives
             if drive.control
@@ -234,6 +275,14 @@ class Service:
                 await asyncio.gather(*orders)
         except TimeoutError:
             log.warning("service.shutdown_stop_timed_out")
+
+    async def _commands_ended(self) -> None:
+        """Wait (bounded) until every command taken before the shutdown has its outcome."""
+        try:
+            async with asyncio.timeout(SHUTDOWN_COMMANDS_S):
+                await self._no_commands.wait()
+        except TimeoutError:
+            log.warning("service.shutdown_commands_timed_out", running=self._running_commands)
 
     async def _publish_stats(self) -> None:
         while True:

@@ -11,7 +11,6 @@ bus logs every command that reaches it as ``command.completed`` with the same ac
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any, Final
 
@@ -21,6 +20,7 @@ from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import Response
+from fastapi.routing import APIRoute
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException
@@ -29,16 +29,19 @@ from starlette.requests import ClientDisconnect
 from fcmaster import __version__
 from fcmaster.adapters import metrics
 from fcmaster.adapters.auth import Authenticator, AuthError, Principal, Role
-from fcmaster.adapters.commands import parse_command
+from fcmaster.adapters.commands import loads, parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.messages import event_json
 from fcmaster.adapters.middleware import (
     BodyLimit,
     SecurityHeaders,
+    StopsOnly,
     error_body,
     json_response,
+    replaying,
     states_json,
 )
+from fcmaster.adapters.readlimit import ReadsBusy, ViewerReads
 from fcmaster.adapters.schemas import (
     CommandUnion,
     DriveOut,
@@ -89,7 +92,9 @@ also takes the token as `?token=`, since browsers cannot set its headers.
 | `cancelled` | 503 | the daemon is shutting down, the line is down, or a stop superseded it |
 
 A 401 means no or an unknown token, a 403 without `outcome` a role too low for the request,
-a 404 an unknown drive, a 400 a body that is not JSON text, a 413 one over 64 KiB.
+a 404 an unknown drive, a 400 a body that is not JSON text, a 413 one over 64 KiB. A
+viewer's parameter reads are spaced out per line (they share the line with the poll); a 429
+says too many are already waiting there.
 """
 
 _bearer = HTTPBearer(auto_error=False, description="a token from http.tokens")
@@ -127,11 +132,39 @@ def _describe(error: dict[str, Any]) -> str:
 
 async def _peek_action(request: Request) -> str | None:
     try:
-        payload = json.loads(await request.body())
+        payload = loads(await request.body())
     except (ValueError, ClientDisconnect, HTTPException):  # not JSON, gone, or too large
         return None
     action = payload.get("action") if isinstance(payload, dict) else None
     return action if isinstance(action, str) else None
+
+
+class _StrictJsonRequest(Request):
+    """A request whose JSON body follows the command rules (no duplicated keys, no NaN)."""
+
+    async def json(self) -> Any:
+        """The body as JSON; json.JSONDecodeError (a 422 ``invalid``) when it breaks a rule."""
+        if not hasattr(self, "_json"):
+            self._json = loads(await self.body())
+        return self._json
+
+
+class _StrictJsonRoute(APIRoute):
+    """Routes that read bodies with :class:`_StrictJsonRequest`."""
+
+    def get_route_handler(self) -> Any:
+        """FastAPI's handler, handed the strict request."""
+        handler = super().get_route_handler()
+
+        async def strict(request: Request) -> Response:
+            # Read through ``request``, which caches the body for the error handlers.
+            body = await request.body()
+            response: Response = await handler(
+                _StrictJsonRequest(request.scope, replaying(body, request.receive))
+            )
+            return response
+
+        return strict
 
 
 def _caller(
@@ -172,7 +205,9 @@ def create_app(
         docs_url=None,  # Swagger UI and ReDoc load from a CDN; the dashboard loads nothing
         redoc_url=None,
     )
+    app.router.route_class = _StrictJsonRoute
     registry = streams if streams is not None else StreamRegistry()
+    viewer_reads = ViewerReads()
     app.state.auth = auth
 
     async def run(
@@ -187,8 +222,9 @@ def create_app(
         try:
             command: Command = parse_command(payload, plan, actor=principal.name)
         except UsageError as exc:
-            _log_refused(principal.name, name, payload.get("action"), "invalid", str(exc))
-            return result_response(CommandResult(outcome=Outcome.INVALID, reason=str(exc)), **extra)
+            result = refusal(exc)
+            _log_refused(principal.name, name, payload.get("action"), result.outcome, str(exc))
+            return result_response(result, **extra)
         return result_response(await gateway.execute(name, command), **extra)
 
     # -- errors ------------------------------------------------------------------------
@@ -304,7 +340,15 @@ def create_app(
     ) -> Response:
         """Read a parameter, named as the drive's manual writes it (e.g. ``16-13``)."""
         payload = {"action": "read", "parameter": param, "index": index}
-        return await run(name, payload, principal, parameter=param, index=index)
+        state = gateway.fleet.find(name)
+        if principal.can(Role.OPERATOR) or state is None:
+            return await run(name, payload, principal, parameter=param, index=index)
+        try:
+            async with viewer_reads.turn(state.bus):
+                return await run(name, payload, principal, parameter=param, index=index)
+        except ReadsBusy as exc:
+            reason = f"{exc}: try again shortly"
+            return json_response(error_body(reason), 429, headers={"Retry-After": "1"})
 
     @app.put(
         "/api/v1/drives/{name}/parameters/{param}",
@@ -363,6 +407,7 @@ def create_app(
             allow_methods=["GET", "POST", "PUT"],
             allow_headers=["Authorization", "Content-Type"],
         )
+    app.add_middleware(StopsOnly)
     app.add_middleware(BodyLimit, limit=MAX_BODY_BYTES)
     return app
 

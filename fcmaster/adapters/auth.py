@@ -27,6 +27,10 @@ import ipaddress
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from fcmaster.errors import ConfigError
+
+DEFAULT_PORT = 8080
+
 
 class Role(enum.IntEnum):
     """What a caller may do; a higher role includes the lower ones."""
@@ -96,6 +100,38 @@ def split_host_port(text: str) -> tuple[str, int | None]:
     else:  # a bare IPv6 address, or no port at all
         host, port = text, ""
     return host, int(port) if port.isdigit() else None
+
+
+def parse_listen(text: str) -> tuple[str, int]:
+    """``"127.0.0.1:8080"``, ``"[::1]:8080"``, ``"0.0.0.0"`` → host and port (8080)."""
+    stripped = text.strip()
+    if stripped.startswith("["):
+        raw = stripped.rpartition("]:")[2] if "]:" in stripped else None
+    else:
+        raw = stripped.partition(":")[2] if stripped.count(":") == 1 else None
+    host, port = split_host_port(stripped)
+    if not host or (raw is not None and not raw.isdigit()):
+        raise ConfigError([("http.listen", f"{text!r} is not like 127.0.0.1:8080")])
+    if port is not None and port > 65535:
+        raise ConfigError([("http.listen", f"port {port} is beyond 65535")])
+    return host, DEFAULT_PORT if port is None else port
+
+
+def listen_problem(listen: str, *, has_tokens: bool) -> str:
+    """Why the API may not listen at ``listen`` ("" when it may).
+
+    The one rule of both ``fcmaster check`` and ``fcmaster run``.
+    """
+    try:
+        host, _ = parse_listen(listen)
+    except ConfigError as exc:
+        return exc.problems[0][1]
+    if not has_tokens and not is_loopback_host(host):
+        return (
+            f"{listen} is not a loopback address: with no http.tokens the API is "
+            "read-only and served on loopback only; listen on 127.0.0.1 or add tokens"
+        )
+    return ""
 
 
 class Authenticator:

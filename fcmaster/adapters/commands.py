@@ -4,14 +4,30 @@
 reverse, jog, set_reference (``frequency_hz`` or ``reference_pct``; start takes them too),
 read and write (``parameter``, optional ``index``, and ``value`` for write). Anything else
 is refused here, with the reason, before it can reach a line.
+
+These are the input rules of every surface (HTTP, MQTT, Modbus), kept in this one place:
+
+- JSON text is read by :func:`loads`, which refuses a duplicated key (a proxy or a log that
+  reads the first ``"action"`` must see what runs) and the non-standard NaN and Infinity;
+- every number is finite and at most :data:`MAX_MAGNITUDE` before any arithmetic is done
+  with it, so ``1e308`` is ``invalid``, never an overflow further down;
+- frequencies and references are magnitudes (≥ 0): direction changes only by forward and
+  reverse, so a negative number is ``invalid``;
+- a reference beyond the drive's configured limits is :class:`BeyondLimits`
+  (``not_allowed``), compared exactly (as fractions, no tolerance) and stated with the
+  number as given: 50.0000001 Hz is beyond 50 Hz, and the reason says 50.0000001.
+
+:func:`refusal` turns what :func:`parse_command` raises into the command's one result.
 """
 
 from __future__ import annotations
 
+import json
 import math
-from typing import Any
+from fractions import Fraction
+from typing import Any, Final
 
-from fcmaster.bus.commands import Action, Command
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan
 from fcmaster.errors import UsageError
 
@@ -22,6 +38,49 @@ _KEYS = {
     Action.WRITE: {"parameter", "index", "value", "persist"},
 }
 _ENVELOPE = {"action", "id"}  # "id" is the MQTT correlation id
+# Beyond any value a drive parameter or a reference can hold (32-bit registers, scaled),
+# and small enough that no scaling below can overflow a float or an integer conversion.
+MAX_MAGNITUDE: Final = 1e12
+
+
+class BeyondLimits(UsageError):
+    """A reference outside the drive's configured limits: ``not_allowed``, not ``invalid``."""
+
+
+def refusal(exc: UsageError) -> CommandResult:
+    """The one result of a command :func:`parse_command` refused with ``exc``."""
+    outcome = Outcome.NOT_ALLOWED if isinstance(exc, BeyondLimits) else Outcome.INVALID
+    return CommandResult(outcome=outcome, reason=str(exc))
+
+
+def loads(text: str | bytes | bytearray) -> Any:
+    """JSON text as Python values; ValueError (json.JSONDecodeError) for a duplicated key.
+
+    NaN, Infinity and numbers too large for a float (``1e400``) are refused here too.
+    """
+    return json.loads(
+        text, object_pairs_hook=_unique_keys, parse_constant=_no_constant, parse_float=_finite_float
+    )
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise json.JSONDecodeError(f"duplicated key {key!r}", "", 0)
+        out[key] = value
+    return out
+
+
+def _no_constant(name: str) -> Any:
+    raise json.JSONDecodeError(f"{name} is not a JSON number", "", 0)
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise json.JSONDecodeError(f"{text} is beyond what a number can hold", "", 0)
+    return value
 
 
 def parse_command(payload: Any, drive: DrivePlan, *, actor: str) -> Command:
@@ -45,10 +104,13 @@ def parse_command(payload: Any, drive: DrivePlan, *, actor: str) -> Command:
     if "frequency_hz" in payload and "reference_pct" in payload:
         raise UsageError("give frequency_hz or reference_pct, not both")
     if "frequency_hz" in payload:
-        hz = _number(payload, "frequency_hz")
+        hz = _magnitude(payload, "frequency_hz")
+        _check_limits(drive, Fraction(hz), f"{_show(hz)} Hz")
         reference_pct = hz / drive.nominal_frequency_hz * 100.0
     elif "reference_pct" in payload:
-        reference_pct = _number(payload, "reference_pct")
+        reference_pct = _magnitude(payload, "reference_pct")
+        exact = Fraction(reference_pct) * Fraction(drive.nominal_frequency_hz) / 100
+        _check_limits(drive, exact, f"{_show(reference_pct)} % ({_show(float(exact))} Hz)")
     if action is Action.SET_REFERENCE and reference_pct is None:
         raise UsageError("set_reference needs frequency_hz or reference_pct")
 
@@ -84,6 +146,45 @@ def parse_command(payload: Any, drive: DrivePlan, *, actor: str) -> Command:
 
 def _number(payload: dict[str, Any], key: str) -> float:
     value = payload[key]
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise UsageError(f"'{key}' must be a finite number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise UsageError(f"'{key}' must be a finite number, got {_brief(value)}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise UsageError(f"'{key}' must be a finite number, got {_brief(value)}")
+    if abs(value) > MAX_MAGNITUDE:  # an int of 400 digits is compared, never converted
+        raise UsageError(f"'{key}' is beyond ±{MAX_MAGNITUDE:g}, got {_brief(value)}")
     return float(value)
+
+
+def _magnitude(payload: dict[str, Any], key: str) -> float:
+    value = _number(payload, key)
+    if value < 0:
+        raise UsageError(
+            f"'{key}' is a magnitude (≥ 0), got {_show(value)}: "
+            "change the direction with forward or reverse"
+        )
+    return abs(value)  # -0.0 is 0
+
+
+def _check_limits(drive: DrivePlan, hz: Fraction, given: str) -> None:
+    """BeyondLimits when ``hz`` (exact) is outside the drive's configured range."""
+    if hz > Fraction(drive.max_frequency_hz):
+        raise BeyondLimits(
+            f"{given} is beyond {drive.name}'s configured limit of "
+            f"{_show(drive.max_frequency_hz)} Hz"
+        )
+    if hz and hz < Fraction(drive.min_frequency_hz):
+        raise BeyondLimits(
+            f"{given} is below {drive.name}'s configured minimum of "
+            f"{_show(drive.min_frequency_hz)} Hz"
+        )
+
+
+def _show(number: float) -> str:
+    """A number exactly as it reads back (shortest round trip), without a bare ".0"."""
+    text = repr(float(number))
+    return text[:-2] if text.endswith(".0") else text
+
+
+def _brief(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:20]}…({len(text)} characters)"

@@ -5,7 +5,9 @@ Config messages go, retained, to ``{prefix}/{component}/{node}/{object}/config``
 (output frequency, commanded reference, and one per measured value as it first appears —
 current, power, voltage, … with the device class its unit implies) and binary sensors
 (running, fault, warning). Only ``control: bus`` drives get buttons (start, stop) and a
-number entity for the reference in Hz, bounded by the drive's configured limits. Entities
+number entity for the reference in Hz, bounded by the drive's configured limits — and only
+when MQTT commands are on without tokens (``mqtt.trust_broker``): Home Assistant's buttons
+cannot carry a token, which would be retained in their configs for all to read. Entities
 are available while both the gateway (its status topic) and the drive are online.
 """
 
@@ -41,10 +43,11 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9_-]")
 class Discovery:
     """Builds the config messages for one base topic and discovery prefix."""
 
-    def __init__(self, topics: Topics, prefix: str) -> None:
-        """Configs under ``prefix`` for the drives published under ``topics``."""
+    def __init__(self, topics: Topics, prefix: str, *, controls: bool = True) -> None:
+        """Configs under ``prefix`` for the drives under ``topics`` (``controls``: buttons)."""
         self._topics = topics
         self._prefix = prefix
+        self._controls = controls
 
     def node(self, state: DriveState) -> str:
         """The drive's node id: ``{base}_{bus}_{drive}``, safe as a topic level."""
@@ -68,7 +71,7 @@ class Discovery:
             self._binary(state, "fault", "Fault", "fault", "problem"),
             self._binary(state, "warning", "Warning", "warning", "problem"),
         ]
-        if plan is not None and plan.control:
+        if plan is not None and plan.control and self._controls:
             configs += [
                 self._button(state, "start", "Start"),
                 self._button(state, "stop", "Stop"),

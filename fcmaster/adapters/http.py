@@ -31,33 +31,24 @@ import structlog
 import uvicorn
 
 from fcmaster.adapters.api import MAX_BODY_BYTES, create_app
-from fcmaster.adapters.auth import Authenticator, Role, is_loopback_host, split_host_port
+from fcmaster.adapters.auth import (
+    DEFAULT_PORT,
+    Authenticator,
+    Role,
+    listen_problem,
+    parse_listen,
+)
 from fcmaster.adapters.gateway import Gateway
+from fcmaster.adapters.http_guard import HEAD_TIMEOUT_S, ConnectionGuard, guarded_protocol
 from fcmaster.adapters.stream import StreamRegistry
 from fcmaster.config import HttpModel
 from fcmaster.errors import ConfigError
 
 log = structlog.get_logger("fcmaster.adapters.http")
 
-DEFAULT_PORT = 8080
+__all__ = ["DEFAULT_PORT", "HttpAdapter", "parse_listen"]
 SHUTDOWN_GRACE_S = 2  # requests in progress (a command awaiting its result) may finish
-MAX_CONNECTIONS = 256  # beyond this uvicorn answers 503: bounded memory whatever happens
 DEMO_TOKEN_NAME = "demo-operator"
-
-
-def parse_listen(text: str) -> tuple[str, int]:
-    """``"127.0.0.1:8080"``, ``"[::1]:8080"``, ``"0.0.0.0"`` → host and port (8080)."""
-    stripped = text.strip()
-    if stripped.startswith("["):
-        raw = stripped.rpartition("]:")[2] if "]:" in stripped else None
-    else:
-        raw = stripped.partition(":")[2] if stripped.count(":") == 1 else None
-    host, port = split_host_port(stripped)
-    if not host or (raw is not None and not raw.isdigit()):
-        raise ConfigError([("http.listen", f"{text!r} is not like 127.0.0.1:8080")])
-    if port is not None and port > 65535:
-        raise ConfigError([("http.listen", f"port {port} is beyond 65535")])
-    return host, DEFAULT_PORT if port is None else port
 
 
 class _Server(uvicorn.Server):
@@ -99,6 +90,7 @@ class HttpAdapter:
         self.metrics_enabled = metrics_enabled
         self.operator_token: str | None = None  # the demo's, once entered
         self._streams = StreamRegistry()
+        self.guard = ConnectionGuard()
         self._server: _Server | None = None
         self._task: asyncio.Task[None] | None = None
         self._socket: socket.socket | None = None
@@ -114,12 +106,9 @@ class HttpAdapter:
 
     def _authenticator(self, host: str) -> Authenticator:
         tokens = [(t.name, Role[t.role.upper()], t.token) for t in self.model.tokens]
-        if not tokens and not is_loopback_host(host):
-            reason = (
-                f"{self.model.listen} is not a loopback address: with no http.tokens the API is "
-                "read-only and served on loopback only; listen on 127.0.0.1 or add tokens"
-            )
-            raise ConfigError([("http.listen", reason)])
+        problem = listen_problem(self.model.listen, has_tokens=bool(tokens))
+        if problem:  # `check` refuses it too; --http-listen can still bring it here
+            raise ConfigError([("http.listen", problem)])
         if self.demo:
             self.operator_token = secrets.token_urlsafe(24)
             tokens.append((DEMO_TOKEN_NAME, Role.OPERATOR, self.operator_token))
@@ -156,7 +145,8 @@ class HttpAdapter:
             ws_max_size=MAX_BODY_BYTES,
             proxy_headers=False,  # the peer address decides loopback, not X-Forwarded-For
             server_header=False,
-            limit_concurrency=MAX_CONNECTIONS,
+            http=guarded_protocol(self.guard),  # timeouts, caps, a reserve for stops
+            timeout_keep_alive=int(HEAD_TIMEOUT_S),
             timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
         )
         self._socket = self._bind(host, port)
@@ -201,6 +191,7 @@ class HttpAdapter:
         server, task, sock = self._server, self._task, self._socket
         if server is None or task is None:
             return
+        log.info("http.closing")
         try:
             self._streams.close_all()
             server.should_exit = True

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 from collections.abc import Iterable
 from typing import Any
 
@@ -11,8 +12,12 @@ from starlette.exceptions import HTTPException
 from starlette.responses import Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from fcmaster.adapters.commands import loads
+from fcmaster.adapters.http_guard import RESERVE_KEY
 from fcmaster.adapters.messages import json_safe
 from fcmaster.state import DriveState
+
+_COMMANDS = re.compile(r"/api/v1/drives/[^/]+/commands")
 
 
 def json_response(content: Any, status_code: int = 200, **kwargs: Any) -> Response:
@@ -79,6 +84,54 @@ class BodyLimit:
             return message
 
         await self.app(scope, limited, send)
+
+
+class StopsOnly:
+    """On a reserve connection (see ``http_guard``) only stop, coast and quick_stop pass."""
+
+    URGENT = frozenset({"stop", "coast", "quick_stop"})
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Pass a stop (or anything on an ordinary connection) on; 503 for the rest."""
+        if scope["type"] != "http" or not scope.get("state", {}).get(RESERVE_KEY):
+            await self.app(scope, receive, send)
+            return
+        body = b""
+        if scope["method"] == "POST" and _COMMANDS.fullmatch(scope["path"]):
+            more = True
+            try:
+                while more:  # BodyLimit, outside, bounds it; the connection guard times it
+                    message = await receive()
+                    body += message.get("body", b"")
+                    more = message.get("more_body", False) and message["type"] == "http.request"
+                payload = loads(body)
+            except (ValueError, HTTPException):  # not JSON, or too large
+                payload = None
+            if isinstance(payload, dict) and payload.get("action") in self.URGENT:
+                await self.app(scope, replaying(body, receive), send)
+                return
+        reason = "the server is at its connection limit: only stop, coast and quick_stop are taken"
+        response = json_response(
+            {"outcome": "cancelled", **error_body(reason)}, 503, headers={"Retry-After": "1"}
+        )
+        await response(scope, receive, send)
+
+
+def replaying(body: bytes, receive: Receive) -> Receive:
+    """A ``receive`` that hands over ``body`` (already read) once, then ``receive``'s own."""
+    given = False
+
+    async def replay() -> Message:
+        nonlocal given
+        if given:
+            return await receive()
+        given = True
+        return {"type": "http.request", "body": body, "more_body": False}
+
+    return replay
 
 
 class SecurityHeaders:

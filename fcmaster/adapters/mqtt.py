@@ -22,6 +22,11 @@ broker. Its parts:
   and runs each valid one in a task of its own; every result goes to the outbox, which
   keeps it across reconnects until the broker has acknowledged it.
 
+Commands are off unless ``mqtt.commands: true`` (then answered ``not_allowed``); when on,
+each payload carries ``"token"``, an operator token of ``http.tokens`` whose name is the
+audit's actor, unless ``mqtt.trust_broker: true`` leaves it to the broker's ACLs (the actor is
+then the bridge's own ``mqtt:{client_id}``).
+
 The session is clean (``clean_session``): commands published while the gateway was away are
 not replayed to it later, when they may no longer be wanted — their senders see no result
 and time out.
@@ -40,7 +45,7 @@ import secrets
 import socket
 import ssl
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from types import TracebackType
 from typing import Any
 from urllib.parse import urlsplit
@@ -49,9 +54,10 @@ import aiomqtt
 import structlog
 from paho.mqtt.reasoncodes import ReasonCode
 
+from fcmaster.adapters.auth import Authenticator, Role
 from fcmaster.adapters.discovery import Discovery
 from fcmaster.adapters.gateway import Gateway
-from fcmaster.adapters.mqtt_commands import CommandDesk
+from fcmaster.adapters.mqtt_commands import CommandDesk, CommandPolicy
 from fcmaster.adapters.mqtt_outbox import Outbox, Outgoing
 from fcmaster.adapters.mqtt_topics import (
     OFFLINE,
@@ -91,11 +97,13 @@ class MqttAdapter:
         demo: bool = False,
         clock: Clock | None = None,
         wall: Callable[[], float] = time.time,
+        tokens: Iterable[tuple[str, str, str]] = (),
     ) -> None:
         """Bridge ``gateway`` to the broker ``model`` names; ConfigError for bad settings.
 
         ``demo`` changes nothing here. ``clock`` paces the heartbeat and the reconnect
-        backoff; ``wall`` stamps events.
+        backoff; ``wall`` stamps events. ``tokens`` are ``http.tokens`` as ``(name, role,
+        secret)``: with ``mqtt.commands`` on, a command carries one of the operator ones.
         """
         self._model = model
         self._gateway = gateway
@@ -114,14 +122,30 @@ class MqttAdapter:
             if not name or set(name) & {"/", "+", "#"}:
                 raise ConfigError([("mqtt", f"{name!r} cannot be an MQTT topic level")])
         self._discovery = (
-            Discovery(self._topics, model.discovery_prefix) if model.discovery else None
+            Discovery(
+                self._topics,
+                model.discovery_prefix,
+                controls=model.commands and model.trust_broker,
+            )
+            if model.discovery
+            else None
         )
         self._discovered: set[tuple[str, str]] = set()
         self._outbox = Outbox()
         self._sent_states: dict[str, DriveState] = {}
         self._nominal_hz: dict[str, float] = {}
         self.actor = f"mqtt:{self.client_id}"
-        self._desk = CommandDesk(gateway, self._topics, self._outbox, actor=self.actor)
+        auth = Authenticator(
+            [(name, Role[role.upper()], secret) for name, role, secret in tokens],
+            anonymous=False,
+        )
+        self._desk = CommandDesk(
+            gateway,
+            self._topics,
+            self._outbox,
+            actor=self.actor,
+            policy=CommandPolicy(enabled=model.commands, auth=None if model.trust_broker else auth),
+        )
         self._tasks: list[asyncio.Task[None]] = []
         self._subscription: Subscription | None = None
         self._rng = random.Random()

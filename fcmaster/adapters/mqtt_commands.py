@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import asyncio
 import json
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Final
 
 import aiomqtt
 import structlog
 
-from fcmaster.adapters.commands import parse_command
+from fcmaster.adapters.auth import Authenticator, AuthError, Role
+from fcmaster.adapters.commands import loads, parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.mqtt_outbox import Outbox
 from fcmaster.adapters.mqtt_topics import Topics, result_payload
@@ -28,15 +30,39 @@ log = structlog.get_logger("fcmaster.adapters.mqtt")
 MAX_COMMAND_BYTES = 64 * 1024
 
 
+@dataclass(slots=True, frozen=True)
+class CommandPolicy:
+    """Whether commands are taken at all, and whose (``auth`` None: the broker decides)."""
+
+    enabled: bool = False
+    auth: Authenticator | None = None
+
+
+TRUST_BROKER: Final = CommandPolicy(enabled=True)
+
+
 class CommandDesk:
     """Takes command messages, runs the valid ones, and files one result for each."""
 
-    def __init__(self, gateway: Gateway, topics: Topics, outbox: Outbox, *, actor: str) -> None:
-        """Commands for ``gateway``'s drives; results filed in ``outbox``; logged as ``actor``."""
+    def __init__(
+        self,
+        gateway: Gateway,
+        topics: Topics,
+        outbox: Outbox,
+        *,
+        actor: str,
+        policy: CommandPolicy = TRUST_BROKER,
+    ) -> None:
+        """Commands for ``gateway``'s drives; results filed in ``outbox``.
+
+        They are logged as ``actor``, unless ``policy`` asks for a token: its name is then
+        the actor.
+        """
         self._gateway = gateway
         self._topics = topics
         self._outbox = outbox
         self.actor = actor
+        self._policy = policy
         self.running: set[asyncio.Task[None]] = set()
 
     def receive(self, message: aiomqtt.Message) -> None:
@@ -54,12 +80,13 @@ class CommandDesk:
                 raise UsageError("the payload is not a JSON object")
             if len(payload) > MAX_COMMAND_BYTES:
                 raise UsageError(f"the payload is longer than {MAX_COMMAND_BYTES} bytes")
-            data = json.loads(payload)
+            data = loads(payload)
         except UsageError as exc:
             self._invalid(bus, drive, None, None, str(exc))
             return
         except (ValueError, RecursionError) as exc:
-            self._invalid(bus, drive, None, None, f"the payload is not valid JSON: {exc}")
+            why = exc.msg if isinstance(exc, json.JSONDecodeError) and not exc.doc else exc
+            self._invalid(bus, drive, None, None, f"the payload is not valid JSON: {why}")
             return
         self._command(bus, drive, data)
 
@@ -86,20 +113,44 @@ class CommandDesk:
         if isinstance(command_id, bool) or not isinstance(command_id, str | int):
             self._invalid(bus, drive, command_id, action, "'id' must be a string or an integer")
             return
+        if not self._policy.enabled:
+            reason = "commands over MQTT are off (mqtt.commands: false)"
+            self._refused(bus, drive, command_id, action, _result(Outcome.NOT_ALLOWED, reason))
+            return
+        data = dict(data)
+        secret = data.pop("token", None)
+        actor = self.actor
+        if self._policy.auth is not None or secret is not None:
+            try:
+                actor = self._operator(secret)
+            except AuthError as exc:
+                self._refused(
+                    bus, drive, command_id, action, _result(Outcome.NOT_ALLOWED, exc.reason)
+                )
+                return
         plan = self._gateway.drive_plan(drive)
         if plan is None or self._gateway.fleet.get(bus, drive) is None:
             self._invalid(bus, drive, command_id, action, f"no drive {drive!r} on bus {bus!r}")
             return
         try:
-            command = parse_command(data, plan, actor=self.actor)
+            command = parse_command(data, plan, actor=actor)
         except UsageError as exc:
-            self._invalid(bus, drive, command_id, action, str(exc))
+            self._refused(bus, drive, command_id, action, refusal(exc))
             return
         task = asyncio.create_task(
             self._execute(bus, drive, command_id, command), name=f"mqtt.command[{bus}/{drive}]"
         )
         self.running.add(task)
         task.add_done_callback(self.running.discard)
+
+    def _operator(self, secret: Any) -> str:
+        """The name of the operator token ``secret``; AuthError (never echoing it) if none."""
+        auth = self._policy.auth or Authenticator((), anonymous=False)
+        if not isinstance(secret, str) or not secret:
+            raise AuthError(401, 'a command needs "token": an operator token of http.tokens')
+        principal = auth.authenticate(f"Bearer {secret}", client_host=None, host_header=None)
+        Authenticator.require(principal, Role.OPERATOR)
+        return principal.name
 
     async def _execute(self, bus: str, drive: str, command_id: Any, command: Command) -> None:
         action = command.action.value
@@ -117,6 +168,11 @@ class CommandDesk:
     def _invalid(
         self, bus: str, drive: str, command_id: Any, action: str | None, reason: str
     ) -> None:
+        self._refused(bus, drive, command_id, action, _result(Outcome.INVALID, reason))
+
+    def _refused(
+        self, bus: str, drive: str, command_id: Any, action: str | None, result: CommandResult
+    ) -> None:
         log.info(
             "command.completed",
             actor=self.actor,
@@ -124,10 +180,10 @@ class CommandDesk:
             drive=drive,
             command=action or "-",
             command_id=command_id,
-            outcome=Outcome.INVALID.value,
-            reason=reason,
+            outcome=result.outcome.value,
+            reason=result.reason,
         )
-        self._answer(bus, drive, command_id, action, _result(Outcome.INVALID, reason))
+        self._answer(bus, drive, command_id, action, result)
 
     def _answer(
         self, bus: str, drive: str, command_id: Any, action: str | None, result: CommandResult

@@ -199,6 +199,10 @@ class BusMaster:
             self._wake.set()
         return await future
 
+    def cancel_queued(self, reason: str) -> None:
+        """Shutdown: end every queued command but stops and the one on the wire, cancelled."""
+        self._resolve(self.planner.cancel_queued(reason))
+
     # -- the loop ------------------------------------------------------------------------
 
     async def _run(self) -> None:

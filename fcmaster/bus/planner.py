@@ -321,6 +321,18 @@ class Planner:
         self._normal.clear()
         return ended
 
+    def cancel_queued(self, reason: str) -> list[Completion]:
+        """End every queued command but the stops and the one on the wire as cancelled.
+
+        At shutdown nothing new may go out: the stops (urgent, always safe) stay, and so
+        does the command whose exchange is on the wire, which ends with what the drive says.
+        """
+        result = _result(Outcome.CANCELLED, reason)
+        ended = [_completion(p, result) for p in self._normal if p is not self._in_flight]
+        kept = [p for p in self._normal if p is self._in_flight]
+        self._normal = deque(kept)
+        return ended
+
     def on_line_down(self) -> None:
         """The port was lost or shut: adopt each drive again when it is next heard from.
 

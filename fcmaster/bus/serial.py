@@ -32,7 +32,8 @@ import structlog
 
 from fcmaster.bus.adapter import Adapter, tune
 from fcmaster.bus.open_errors import open_error
-from fcmaster.errors import PortError, ReplyTimeout
+from fcmaster.bus.portlock import in_use_message, lock_refused
+from fcmaster.errors import PortError, PortInUse, ReplyTimeout
 
 log = structlog.get_logger("fcmaster.bus")
 
@@ -182,6 +183,7 @@ class SerialTransport:
         self.adapter: Adapter | None = None  # the USB adapter behind a local port, once open
         self._receiver = _Receiver()
         self._transport: _Port | None = None
+        self.in_use: PortInUse | None = None  # why the last open failed, if another has it
 
     async def open(self) -> None:
         """Open the port (in a worker thread: opening can block on some adapters)."""
@@ -206,7 +208,11 @@ class SerialTransport:
                         loop, lambda: receiver, instance
                     )
         except (serial.SerialException, OSError, ValueError, termios.error) as exc:
+            if lock_refused(exc):  # another program has it: say who, and touch nothing
+                self.in_use = PortInUse(in_use_message(self.port))
+                raise self.in_use from exc
             raise PortError(open_error(self.port, exc)) from exc
+        self.in_use = None
         self._transport = transport
 
     def _open_serial(self) -> serial.Serial:
@@ -216,7 +222,9 @@ class SerialTransport:
             # pyserial-asyncio's own timeout=0), and carries no parity bits anyway.
             log.debug("bus.pty_parity_ignored", port=self.port, parity=settings["parity"])
             settings = {**settings, "parity": serial.PARITY_NONE}
-        instance = serial.serial_for_url(self.port, do_not_open=True, timeout=0, **settings)
+        instance = serial.serial_for_url(
+            self.port, do_not_open=True, timeout=0, exclusive=True, **settings
+        )
         if self._rs485:
             instance.rs485_mode = serial.rs485.RS485Settings(
                 rts_level_for_tx=True, rts_level_for_rx=False

@@ -123,3 +123,18 @@ def test_a_missing_file_exits_2_and_says_so(tmp_path: Path) -> None:
     result = _check(tmp_path / "nowhere.yaml")
     assert result.returncode == 2
     assert "nowhere.yaml: cannot read" in result.stderr
+
+
+def test_check_refuses_what_run_refuses_and_every_bus_at_once(tmp_path: Path) -> None:
+    config = tmp_path / "plant.yaml"
+    config.write_text(
+        GOOD.replace("baudrate: 19200", "baudrate: fast")
+        .replace("{name: fan-3, address: 9}", "{name: fan-3, address: 131}")
+        .replace("127.0.0.1:8080", "0.0.0.0:8080")
+    )
+    result = _check(config)
+    assert result.returncode == 2
+    problems = dict(line.strip().split(": ", 1) for line in result.stderr.splitlines()[1:])
+    assert sorted(problems) == ["buses[0].baudrate", "buses[1].drives[2].address", "http.listen"]
+    assert problems["buses[1].drives[2].address"] == "131 is outside 1-126"
+    assert problems["http.listen"].startswith("0.0.0.0:8080 is not a loopback address")

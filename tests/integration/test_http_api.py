@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
+import itertools
+import time
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -9,7 +12,8 @@ import httpx
 import pytest
 from structlog.testing import capture_logs
 
-from fcmaster.bus.commands import Action, CommandResult, Outcome
+from fcmaster.adapters.readlimit import VIEWER_READ_GAP_S
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.protocol.codec import DriveError, ParameterKey, ParameterValue
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
@@ -200,8 +204,8 @@ MALFORMED: list[tuple[str, bytes, str]] = [
     ("unknown-action", b'{"action": "launch"}', "launch"),
     ("number-as-text", b'{"action": "start", "frequency_hz": "30"}', "frequency_hz"),
     ("bool-as-number", b'{"action": "start", "reference_pct": true}', "reference_pct"),
-    ("nan", b'{"action": "start", "frequency_hz": NaN}', "finite"),
-    ("infinity", b'{"action": "set_reference", "frequency_hz": Infinity}', "finite"),
+    ("nan", b'{"action": "start", "frequency_hz": NaN}', "NaN is not a JSON number"),
+    ("infinity", b'{"action": "set_reference", "frequency_hz": Infinity}', "Infinity is not"),
     ("unknown-key", b'{"action": "stop", "frequency_hz": 10}', "frequency_hz"),
     (
         "both-references",
@@ -211,6 +215,11 @@ MALFORMED: list[tuple[str, bytes, str]] = [
     ("reference-missing", b'{"action": "set_reference"}', "set_reference needs"),
     ("negative-index", b'{"action": "read", "parameter": "16-13", "index": -1}', "index"),
     ("write-without-value", b'{"action": "write", "parameter": "3-41"}', "value"),
+    ("duplicated-action", b'{"action": "stop", "action": "start"}', "duplicated key 'action'"),
+    ("negative-frequency", b'{"action": "start", "frequency_hz": -40}', "magnitude (≥ 0)"),
+    ("negative-reference", b'{"action": "set_reference", "reference_pct": -1}', "magnitude"),
+    ("huge-value", b'{"action": "write", "parameter": "3-41", "value": 1e308}', "beyond"),
+    ("overflowing-value", b'{"action": "write", "parameter": "3-41", "value": 1e400}', "beyond"),
 ]
 
 
@@ -262,18 +271,39 @@ async def test_an_oversized_chunked_body_is_413_too(client: httpx.AsyncClient) -
 async def test_a_reference_beyond_the_limit_is_refused_with_the_limit_named(
     gateway: FakeGateway, client: httpx.AsyncClient
 ) -> None:
-    limit = "75 Hz is beyond pump-1's configured limit of 50 Hz"  # as the bus planner says
-    gateway.respond = lambda _drive, _command: CommandResult(
-        outcome=Outcome.NOT_ALLOWED, reason=limit
-    )
-    response = await client.post(
-        "/api/v1/drives/pump-1/commands",
-        json={"action": "set_reference", "reference_pct": 150},
-        headers=OPERATOR,
-    )
+    with capture_logs() as logs:
+        response = await client.post(
+            "/api/v1/drives/pump-1/commands",
+            json={"action": "set_reference", "frequency_hz": 50.0000001},
+            headers=OPERATOR,
+        )
     assert response.status_code == 403
-    assert response.json() == {"outcome": "not_allowed", "reason": limit}
-    assert gateway.executed[0][1].reference_pct == 150.0  # never clamped on the way
+    reason = "50.0000001 Hz is beyond pump-1's configured limit of 50 Hz"
+    assert response.json() == {"outcome": "not_allowed", "reason": reason}
+    assert gateway.executed == []  # refused, never clamped on the way
+    (refused,) = [e for e in logs if e["event"] == "http.command_refused"]
+    assert (refused["actor"], refused["outcome"]) == ("ops", "not_allowed")
+
+
+async def test_a_parameter_write_of_a_huge_number_is_invalid_not_an_error(
+    gateway: FakeGateway, client: httpx.AsyncClient
+) -> None:
+    response = await client.put(
+        "/api/v1/drives/pump-1/parameters/3-41",
+        content=b'{"value": 1e308}',
+        headers={**OPERATOR, "Content-Type": "application/json"},
+    )
+    assert response.status_code == 422
+    assert response.json()["outcome"] == "invalid"
+    assert "'value' is beyond" in response.json()["reason"]
+    duplicated = await client.put(
+        "/api/v1/drives/pump-1/parameters/3-41",
+        content=b'{"value": 1, "value": 2}',
+        headers={**OPERATOR, "Content-Type": "application/json"},
+    )
+    assert duplicated.status_code == 422
+    assert "duplicated key 'value'" in duplicated.json()["reason"]
+    assert gateway.executed == []
 
 
 # -- parameters ------------------------------------------------------------------------------
@@ -379,3 +409,26 @@ async def test_the_openapi_document_lists_every_endpoint(client: httpx.AsyncClie
     body = document["paths"]["/api/v1/drives/{name}/commands"]["post"]["requestBody"]
     schema = body["content"]["application/json"]["schema"]
     assert schema["discriminator"]["propertyName"] == "action"
+
+
+async def test_viewer_reads_are_spaced_out_per_line_and_operator_reads_are_not(
+    gateway: FakeGateway, client: httpx.AsyncClient
+) -> None:
+    started: list[tuple[str, float]] = []
+
+    def record(_drive: str, command: Command) -> CommandResult:
+        started.append((command.actor, time.monotonic()))
+        return CommandResult(outcome=Outcome.DONE)
+
+    gateway.respond = record
+    path = "/api/v1/drives/pump-1/parameters/16-13"
+    viewers = [client.get(path, headers=VIEWER) for _ in range(4)]
+    answers = await asyncio.gather(*viewers, client.get(path, headers=OPERATOR))
+    assert [a.status_code for a in answers] == [200] * 5
+    assert started[0][0] in ("scada", "ops")
+    viewer_times = [t for actor, t in started if actor == "scada"]
+    gaps = [b - a for a, b in itertools.pairwise(viewer_times)]
+    assert len(gaps) == 3
+    assert min(gaps) >= VIEWER_READ_GAP_S * 0.99
+    (operator_at,) = [t for actor, t in started if actor == "ops"]
+    assert operator_at < viewer_times[1]  # it did not wait behind the viewers

@@ -28,7 +28,7 @@ buses:
     drives:
       - {name: pump-1, address: 1, control: bus, max_frequency_hz: 40}
       - {name: fan-2, address: 2}
-mqtt: {url: URL, reconnect_min_s: 0.05}
+mqtt: {url: URL, reconnect_min_s: 0.05, commands: true, trust_broker: true}
 """
 PUMP = "fcmaster/line1/pump-1/command"
 
@@ -40,7 +40,7 @@ async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
 
 
 def model(broker: Broker) -> MqttModel:
-    return MqttModel(url=broker.url, reconnect_min_s=0.05)
+    return MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True, trust_broker=True)
 
 
 async def test_commands_reach_the_simulated_drive_and_answer_with_their_id(
@@ -132,8 +132,16 @@ INVALID = [
     pytest.param("line1/pump-1", b'{"id": "x", "action": 3}', "x", "'action'", id="action-type"),
     pytest.param("line1/pump-1", b'{"id": "x", "action": "start", "frequency_hz": "fast"}', "x",
                  "finite number", id="wrong-type"),
-    pytest.param("line1/pump-1", b'{"id": "x", "action": "start", "frequency_hz": NaN}', "x",
-                 "finite number", id="nan"),
+    pytest.param("line1/pump-1", b'{"id": "x", "action": "start", "frequency_hz": NaN}', None,
+                 "NaN is not a JSON number", id="nan"),
+    pytest.param("line1/pump-1", b'{"id": "x", "action": "stop", "action": "start"}', None,
+                 "duplicated key 'action'", id="duplicated-key"),
+    pytest.param("line1/pump-1", b'{"id": "x", "action": "start", "frequency_hz": -40}', "x",
+                 "magnitude (≥ 0)", id="negative-frequency"),
+    pytest.param("line1/pump-1", b'{"id": "x", "action": "write", "parameter": "3-41", '
+                 b'"value": 1e308}', "x", "'value' is beyond", id="huge-value"),
+    pytest.param("line1/pump-1", b'{"id": "x", "action": "write", "parameter": "3-41", '
+                 b'"value": 1e400}', None, "beyond what a number can hold", id="overflow"),
     pytest.param("line1/pump-1", b'{"id": "x", "action": "stop", "force": 1}', "x",
                  "does not take", id="unknown-key"),
     pytest.param("line1/pump-1", b'{"id": "x", "action": "read"}', "x", "'parameter'",
@@ -171,6 +179,22 @@ async def test_invalid_commands_get_one_invalid_result_and_never_reach_a_line(
     assert logged[0]["actor"] == adapter.actor
     assert logged[0]["outcome"] == "invalid"
     assert adapter.actor.startswith("mqtt:")
+
+
+async def test_a_reference_beyond_the_limit_is_not_allowed_stated_exactly(broker: Broker) -> None:
+    gateway = FakeGateway()
+    async with (
+        asyncio.timeout(LIMIT_S),
+        Recorder(broker, "fcmaster/#") as client,
+        MqttAdapter(model(broker), gateway) as adapter,
+    ):
+        await adapter.connected.wait()
+        result = await client.command(
+            PUMP, {"id": 5, "action": "set_reference", "frequency_hz": 50.0000001}
+        )
+    assert result["outcome"] == "not_allowed"
+    assert result["reason"] == "50.0000001 Hz is beyond pump-1's configured limit of 50 Hz"
+    assert gateway.executed == []
 
 
 async def test_a_slow_read_does_not_hold_up_a_stop_for_another_drive(broker: Broker) -> None:

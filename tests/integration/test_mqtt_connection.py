@@ -12,7 +12,7 @@ import pytest
 from structlog.testing import capture_logs
 
 from fcmaster.adapters.mqtt import MqttAdapter
-from fcmaster.config import parse
+from fcmaster.config import MqttModel, TlsModel, parse
 from fcmaster.errors import ConfigError
 from fcmaster.service import Service
 from tests.integration.mosquitto import Broker, Recorder, payload_text
@@ -112,12 +112,13 @@ async def test_tls_with_a_ca_and_a_client_certificate(tmp_path: Path) -> None:
 
 
 def test_unreadable_certificates_are_a_config_error(tmp_path: Path) -> None:
-    config = parse(
-        CONFIG.replace("URL", "mqtts://127.0.0.1:8883") + f"  tls: {{ca: {tmp_path / 'none'}}}\n"
-    )
-    assert config.model.mqtt is not None
+    missing = tmp_path / "none"
+    with pytest.raises(ConfigError) as caught:  # `check` says so, as `run` would
+        parse(CONFIG.replace("URL", "mqtts://127.0.0.1:8883") + f"  tls: {{ca: {missing}}}\n")
+    assert caught.value.problems == [("mqtt.tls.ca", f"cannot read {missing}")]
+    model = MqttModel(url="mqtts://127.0.0.1:8883", tls=TlsModel(ca=str(missing)))
     with pytest.raises(ConfigError, match=r"mqtt\.tls"):
-        MqttAdapter(config.model.mqtt, FakeGateway())
+        MqttAdapter(model, FakeGateway())
 
 
 @pytest.mark.parametrize(
@@ -147,10 +148,10 @@ def test_mqtt_settings_are_checked_with_their_key_path(
 
 def test_names_that_cannot_be_topic_levels_are_config_errors() -> None:
     text = "buses: [{name: 'a/b', port: sim://x, drives: [{name: 'p+1', address: 1}]}]\n"
-    parse(text)  # without MQTT, the names are fine
-    with pytest.raises(ConfigError) as caught:
-        parse(text + "mqtt: {}\n")
-    assert [where for where, _ in caught.value.problems] == [
-        "buses[0].name",
-        "buses[0].drives[0].name",
-    ]
+    for tail in ("", "mqtt: {}\n"):  # with MQTT or without: every surface must address them
+        with pytest.raises(ConfigError) as caught:
+            parse(text + tail)
+        assert [where for where, _ in caught.value.problems] == [
+            "buses[0].name",
+            "buses[0].drives[0].name",
+        ]

@@ -37,7 +37,9 @@ def entities(client: Recorder, pattern: str) -> dict[str, Any]:
 
 async def test_each_drive_is_a_device_and_only_bus_drives_get_controls(broker: Broker) -> None:
     gateway = FakeGateway()
-    settings = MqttModel(url=broker.url, discovery=True, reconnect_min_s=0.05)
+    settings = MqttModel(
+        url=broker.url, discovery=True, reconnect_min_s=0.05, commands=True, trust_broker=True
+    )
     async with (
         asyncio.timeout(LIMIT_S),
         Recorder(broker, "homeassistant/#", "fcmaster/#") as ha,

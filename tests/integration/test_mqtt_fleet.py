@@ -27,6 +27,8 @@ mqtt:
   url: URL
   status_topic: fcmaster/gateways/BUS-pc/status
   reconnect_min_s: 0.05
+  commands: true
+  trust_broker: true
 """
 
 

@@ -22,7 +22,8 @@ buses:
     drives:
       - {name: pump-1, address: 1, control: bus}
       - {name: fan-2, address: 2}
-mqtt: {url: URL, reconnect_min_s: 0.05, reconnect_max_s: 0.2}
+mqtt: {url: URL, reconnect_min_s: 0.05, reconnect_max_s: 0.2, commands: true,
+       trust_broker: true}
 """
 DRIVES = ("pump-1", "fan-2")
 
@@ -70,8 +71,9 @@ async def test_no_command_is_left_without_a_result_across_a_broker_restart(
     results = "fcmaster/+/+/command/result"
     try:
         async with asyncio.timeout(LIMIT_S):
-            adapter = MqttAdapter(MqttModel(url=broker.url, reconnect_min_s=0.05,
-                                            reconnect_max_s=0.2), gateway)  # fmt: skip
+            adapter = MqttAdapter(MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True,
+                                            trust_broker=True, reconnect_max_s=0.2),
+                                  gateway)  # fmt: skip
             async with adapter:
                 await adapter.connected.wait()
                 async with Recorder(broker, results, identifier="plant", clean=False) as plant:
@@ -100,7 +102,10 @@ async def test_the_bridge_keeps_trying_while_there_is_no_broker(tmp_path: Path) 
     gateway = FakeGateway()
     gateway.reply("pump-1")
     async with asyncio.timeout(LIMIT_S):
-        adapter = MqttAdapter(MqttModel(url=broker.url, reconnect_min_s=0.05), gateway)
+        adapter = MqttAdapter(
+            MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True, trust_broker=True),
+            gateway,
+        )
         async with adapter:
             await asyncio.sleep(0.3)
             assert not adapter.connected.is_set()

@@ -1,3 +1,4 @@
+import json
 import textwrap
 from pathlib import Path
 
@@ -183,3 +184,107 @@ def test_a_missing_file_is_a_config_error(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as info:
         load(tmp_path / "absent.yaml")
     assert "cannot read" in info.value.problems[0][1]
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["sl/ash", "a+b", "a#b", "two words", "tab\there", "..", ".hidden", "50%", "é", "x" * 65],
+)
+def test_a_name_no_surface_can_address_is_refused(name: str) -> None:
+    drive = f"{{name: {json.dumps(name)}, address: 1}}"
+    text = f"buses: [{{name: line1, port: sim://x, drives: [{drive}]}}]"
+    with pytest.raises(ConfigError) as caught:
+        parse(text)
+    [(where, why)] = caught.value.problems
+    assert where == "buses[0].drives[0].name"
+    assert "cannot be addressed over HTTP and MQTT" in why
+
+
+@pytest.mark.parametrize("name", ["pump-1", "Line_2", "fan.3", "7", "a" * 64])
+def test_plain_names_are_addressable(name: str) -> None:
+    quoted = json.dumps(name)
+    config = parse(
+        f"buses: [{{name: {quoted}, port: sim://x, drives: [{{name: {quoted}, address: 1}}]}}]"
+    )
+    assert (config.lines[0].name, config.lines[0].drives[0].name) == (name, name)
+
+
+def test_problems_in_several_buses_and_sections_are_reported_in_one_pass() -> None:
+    text = textwrap.dedent(
+        """\
+        buses:
+          - name: hall
+            port: /dev/ttyUSB0
+            protocol: profibus
+          - name: roof
+            port: /dev/ttyUSB1
+            drives:
+              - {name: fan-1, address: 200}
+              - {name: fan-2, address: 2, colour: red}
+              - {name: fan-1, address: 3, monitor: [bogus]}
+          - name: sl/ash
+            port: ${FCM_TEST_UNSET}
+            baudrate: fast
+            drives:
+              - {name: mixer, address: 4, min_frequency_hz: 60}
+          - name: yard
+            port: /dev/ttyUSB2
+            drives:
+              - {name: fan-9, address: 0}
+        http: {listen: 0.0.0.0:8080}
+        mqtt: {url: "http://broker"}
+        """
+    )
+    with pytest.raises(ConfigError) as caught:
+        parse(text, env={})
+    problems = dict(caught.value.problems)
+    assert problems.pop("buses[2].port") == "environment variable FCM_TEST_UNSET is not set"
+    assert "is not one of" in problems.pop("buses[0].protocol")
+    assert problems.pop("buses[1].drives[1].colour") == "unknown key"
+    assert "input should be a valid integer" in problems.pop("buses[2].baudrate")
+    assert "mqtt.url" in " ".join(problems)
+    problems = {k: v for k, v in problems.items() if not k.startswith("mqtt")}
+    # the meaning of the well-formed parts, in the same pass
+    assert problems == {
+        "buses[1].drives[0].address": "200 is outside 1-126",
+        "buses[1].drives[2].name": "drive name 'fan-1' is already used at buses[1].drives[0].name",
+        "buses[1].drives[2].monitor[0]": problems["buses[1].drives[2].monitor[0]"],
+        "buses[3].drives[0].address": "0 is outside 1-126",
+        "http.listen": (
+            "0.0.0.0:8080 is not a loopback address: with no http.tokens the API is read-only "
+            "and served on loopback only; listen on 127.0.0.1 or add tokens"
+        ),
+    }
+    assert "bogus" in problems["buses[1].drives[2].monitor[0]"]
+
+
+def test_a_simulation_section_run_would_refuse_is_refused_by_the_check() -> None:
+    text = "buses: [{name: sim1, port: sim://sim1, simulation: {colour: red}}]\n"
+    with pytest.raises(ConfigError) as caught:
+        parse(text)
+    assert caught.value.problems == [("buses.sim1.simulation.colour", "unknown key")]
+    drive = "drives: [{name: d1, address: 1}]"
+    simulation = "simulation: {response_delay_ms: 1}"  # 8-35 takes 5-10000 ms
+    text = f"buses: [{{name: sim1, port: sim://sim1, {drive}, {simulation}}}]"
+    with pytest.raises(ConfigError) as caught:
+        parse(text)
+    [(where, why)] = caught.value.problems
+    assert where == "buses.sim1.simulation"
+    assert "8-35" in why
+
+
+@pytest.mark.parametrize(
+    "buses",
+    [
+        "[5, {name: b, port: /dev/ttyUSB1, drives: [{name: x, address: 200}]}]",
+        "[{name: a, port: /dev/ttyUSB0, drives: 5}, "
+        "{name: b, port: /dev/ttyUSB1, drives: [{name: x, address: 200}]}]",
+        "[{name: a, port: /dev/ttyUSB0, drives: [7, {name: y, address: 300}]}]",
+    ],
+)
+def test_odd_shapes_are_reported_with_the_meaning_of_the_rest(buses: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        parse(f"buses: {buses}\n")
+    paths = [path for path, _ in caught.value.problems]
+    assert len(paths) == 2
+    assert any(path.endswith(".address") for path in paths)

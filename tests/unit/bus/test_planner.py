@@ -507,6 +507,28 @@ def test_stop_does_not_cancel_a_start_already_on_the_wire() -> None:
     assert results(report) == [Outcome.DONE]
 
 
+def test_at_shutdown_only_stops_and_the_command_on_the_wire_are_kept() -> None:
+    p = planner(A, B)
+    adopted(p)
+    p.submit("a", start(50.0), "on-wire")
+    in_flight = take(p)
+    p.submit("b", start(10.0), "start")
+    p.submit("a", Command(action=Action.WRITE, parameter="3-41", value=5.0), "write")
+    assert p.submit("a", STOP, "stop") == []  # the start of a is on the wire: not superseded
+    ended = p.cancel_queued("fcmaster is shutting down")
+    assert [(c.tickets, c.result.outcome, c.result.reason) for c in ended] == [
+        (("start",), Outcome.CANCELLED, "fcmaster is shutting down"),
+        (("write",), Outcome.CANCELLED, "fcmaster is shutting down"),
+    ]
+    assert results(p.on_reply(in_flight, reply(1, running=True, output_pct=50.0), 0.0)) == [
+        Outcome.DONE
+    ]
+    step, report = answer(p, running=True, output_pct=50.0)
+    assert (step.slot.name if step.slot else None, telegram(step).pcd1) == ("a", STOP_WORD)
+    assert results(report) == [Outcome.DONE]
+    assert not p.has_commands
+
+
 def test_stop_does_not_cancel_a_start_whose_first_attempt_failed() -> None:
     p = planner(A)
     adopted(p)
