@@ -319,6 +319,8 @@ class Planner:
         ended = [_completion(p, result) for p in (*self._urgent, *self._normal)]
         self._urgent.clear()
         self._normal.clear()
+        self._in_flight = None
+        self._undo = None
         return ended
 
     def on_line_down(self) -> None:
