@@ -71,6 +71,8 @@ class BusModel(_Model):
     response_delay_ms: float = Field(default=10.0, ge=0)
     offline_after: int = Field(default=3, ge=1)
     probe_interval_s: float = Field(default=5.0, gt=0)
+    # the most of the line's time probes of absent drives may take while others answer
+    probe_share: float = Field(default=0.1, gt=0, le=0.5)
     echo: bool = False
     rs485: bool = False
     terminator: Literal["none", "cr", "crlf"] = "cr"  # mitsubishi: as the drive's Pr.124
@@ -362,6 +364,7 @@ def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
         response_delay_s=bus.response_delay_ms / 1000.0,
         offline_after=bus.offline_after,
         probe_interval_s=bus.probe_interval_s,
+        probe_share=bus.probe_share,
         echo=bus.echo,
         rs485=bus.rs485,
         terminator=bus.terminator,

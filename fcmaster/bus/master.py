@@ -285,6 +285,7 @@ class BusMaster:
         self._log.warning("bus.lost", error=reason, recent_frames=self.recent_frames)
         self._resolve(self.planner.cancel_all(cancel_reason))
         self.planner.on_line_down()  # when it is back, adopt the drives as at start
+        self.stats.line_silent = False
         for slot in self.planner.slots:
             if slot.online:
                 slot.online = None
@@ -316,7 +317,7 @@ class BusMaster:
         clock, link, planner = self._clock, self._link, self.planner
         while True:
             now = clock.now()
-            step = planner.next_step(now)
+            step = planner.peek(now)
             if step is None:
                 self._flush_deferred()
                 await self._idle(planner.next_wakeup(now))
@@ -325,8 +326,8 @@ class BusMaster:
                 # The next step was chosen (and encoded) inside the pause, where it is free.
                 await clock.sleep_until(link.ready_at)
                 if step.kind is not StepKind.COMMAND and planner.has_commands:
-                    planner.retract(step)  # a command came in meanwhile: it goes first
-                    continue
+                    continue  # a command came in meanwhile: it goes first
+            planner.commit(step, clock.now())
             exchange = step.exchange
             await link.send(exchange)
             self._flush_deferred()  # the layers above get the last reply while this one travels
@@ -377,6 +378,12 @@ class BusMaster:
     def _handle(self, report: Report) -> None:
         self._resolve(report.completions)
         now = self._clock.now()
+        if report.line_silent is not None:
+            self.stats.line_silent = report.line_silent
+            if report.line_silent:
+                self._log.warning("bus.line_silent", recent_frames=self.recent_frames)
+            else:
+                self._log.info("bus.line_answered")
         for transition in report.transitions:
             drive, online = transition.drive, transition.online
             if online:

@@ -9,13 +9,19 @@ without asyncio. Order of service (DESIGN.md):
 
 1. urgent commands (stop, coast, quick stop), oldest first;
 2. other commands and parameter access, in arrival order;
-3. a probe of a demoted drive, when its slow probe timer is due;
+3. a probe of a demoted drive, when one is due and the probe budget allows;
 4. the idle poll, round-robin over the drives that are not demoted.
 
-Commands are retried up to ``retries`` times, each retry going back to the head of its
-queue so an urgent stop can still come in between. Idle polls are never retried: a failed
-poll counts toward demotion and the round moves on, so a dead drive costs one timeout per
-round until it is demoted, then one per probe interval.
+Polls, probes, demotion, the probe budget and line silence are the
+:class:`~fcmaster.bus.rotation.Rotation`'s. Commands are retried up to ``retries`` times,
+each retry going back to the head of its queue so an urgent stop can still come in between.
+Idle polls are never retried: a failed poll counts toward demotion and the round moves on,
+so a dead drive costs one timeout per round until it is demoted, then one probe in its
+turn, within the probes' share of the line.
+
+Choosing and doing are apart: :meth:`Planner.peek` chooses the next step and changes
+nothing; :meth:`Planner.commit` makes it happen when it goes on the wire. A command's
+lifecycle is its :class:`~fcmaster.bus.steps.Phase`.
 
 Control state. A ``control: bus`` drive carries its commanded :class:`ControlIntent` in
 every exchange, which keeps the drive's control-word watchdog fed. Before the master knows
@@ -51,14 +57,35 @@ from __future__ import annotations
 
 import dataclasses
 from collections import deque
-from dataclasses import dataclass, field
-from enum import Enum
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.bus.rotation import Choice, Rotation
+from fcmaster.bus.steps import (
+    Completion,
+    DriveSlot,
+    Pending,
+    Phase,
+    Report,
+    Step,
+    StepKind,
+    Transition,
+)
 from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import DriveCodec, Exchange, ParameterKey, Reply
 from fcmaster.protocol.drive import ControlIntent, Motion
+
+__all__ = [
+    "Completion",
+    "DriveSlot",
+    "Pending",
+    "Phase",
+    "Planner",
+    "Report",
+    "Step",
+    "StepKind",
+    "Transition",
+]
 
 _STOPPING = (Motion.STOP, Motion.COAST, Motion.QUICK_STOP)
 REFERENCE_LIMIT_PCT = 199.99  # the most a reference can say (FC: 0x7FFF); adoption stays below
@@ -70,94 +97,6 @@ _BROADCASTS = frozenset((Action.START, Action.STOP, Action.COAST, Action.QUICK_S
 # Actions that change only part of the commanded state, so the rest must be known first
 # (so does a start that keeps the present reference).
 _RELATIVE_ACTIONS = frozenset((Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE, Action.RESET))
-
-
-class StepKind(Enum):
-    """Why an exchange is on the wire."""
-
-    COMMAND = "command"
-    POLL = "poll"
-    PROBE = "probe"
-
-
-@dataclass(slots=True, eq=False)
-class DriveSlot:
-    """The bus-side state of one drive."""
-
-    plan: DrivePlan
-    sequence: tuple[ParameterKey | None, ...]
-    intent: ControlIntent | None = None  # what every exchange commands; None: nothing
-    online: bool | None = None  # None until the first reply or demotion
-    failures: int = 0  # consecutive
-    next_probe_at: float = 0.0
-    cursor: int = 0
-    urgent_reads: deque[ParameterKey] = field(default_factory=deque)
-    fault: bool = False
-    warning: bool = False
-    running: bool | None = None  # as the last status said; None: not known yet
-    reverse: bool = False
-    output_pct: float | None = None  # the last output reported, in % of nominal
-    deaf_until: float = 0.0  # restarting (after an inverter reset): nothing goes to it before
-
-    @property
-    def name(self) -> str:
-        """The drive's configured name."""
-        return self.plan.name
-
-    @property
-    def address(self) -> int:
-        """The drive's bus address."""
-        return self.plan.address
-
-
-@dataclass(slots=True, eq=False)
-class Pending:
-    """A command waiting for the line, with every ticket its result answers."""
-
-    command: Command
-    slot: DriveSlot | None  # None: a broadcast to the line
-    tickets: list[object]
-    attempts: int = 0
-    part: int = 0  # which of the command's exchanges is next
-    intent: ControlIntent | None = None  # the intent this command sends, once built
-    access: tuple[Exchange, ...] = ()  # a read's or write's exchanges, once built
-    learned: int = 0  # state-learning polls answered before a relative command
-
-
-@dataclass(slots=True, frozen=True)
-class Step:
-    """One exchange to carry out."""
-
-    kind: StepKind
-    exchange: Exchange
-    slot: DriveSlot | None
-    pending: Pending | None = None
-
-
-@dataclass(slots=True, frozen=True)
-class Completion:
-    """A command that has ended: resolve every ticket with ``result``."""
-
-    tickets: tuple[object, ...]
-    command: Command
-    drive: str
-    result: CommandResult
-
-
-@dataclass(slots=True, frozen=True)
-class Transition:
-    """A drive that went online or offline."""
-
-    drive: DrivePlan
-    online: bool
-
-
-@dataclass(slots=True)
-class Report:
-    """What one reply or failure changed, for the master to pass on."""
-
-    completions: list[Completion] = field(default_factory=list)
-    transitions: list[Transition] = field(default_factory=list)
 
 
 class Planner:
@@ -190,11 +129,9 @@ class Planner:
             ):
                 stop = Command(action=Action.STOP, actor="on_start")
                 self._urgent.append(Pending(stop, slot, []))
-        self._next_poll = 0
+        self.rotation = Rotation(plan, self.slots)
         self._in_flight: Pending | None = None  # the command whose step is on the wire
-        # how to take back the poll or probe last chosen: slot, round-robin position,
-        # rotation cursor, urgent read taken, probe time
-        self._undo: tuple[DriveSlot, int, int, ParameterKey | None, float] | None = None
+        self._peeked: Step | None = None  # the step peek chose, until it is committed
 
     # -- commands in -------------------------------------------------------------------
 
@@ -282,8 +219,8 @@ class Planner:
         for pending in self._normal:
             if (
                 pending.command.action in _MOTION_ACTIONS
+                and pending.phase in _UNSENT
                 and pending.attempts == 0
-                and pending.part == 0
                 and pending is not self._in_flight
                 and (slot is None or pending.slot is slot or pending.slot is None)
             ):
@@ -303,8 +240,8 @@ class Planner:
                 continue
             if (
                 queued.command.action is Action.SET_REFERENCE
+                and queued.phase in _UNSENT
                 and queued.attempts == 0
-                and queued.intent is None
                 and queued is not self._in_flight
             ):
                 queued.command = pending.command
@@ -320,7 +257,7 @@ class Planner:
         self._urgent.clear()
         self._normal.clear()
         self._in_flight = None
-        self._undo = None
+        self._peeked = None
         return ended
 
     def on_line_down(self) -> None:
@@ -332,6 +269,12 @@ class Planner:
         """
         for slot in self.slots:
             _forget(slot)
+        self.rotation.line_down()
+
+    @property
+    def line_silent(self) -> bool:
+        """Whether every drive that was answering fell silent together (a line fault)."""
+        return self.rotation.silent
 
     @property
     def has_commands(self) -> bool:
@@ -341,54 +284,66 @@ class Planner:
     # -- what next -----------------------------------------------------------------------
 
     def next_step(self, now: float) -> Step | None:
-        """The next exchange to carry out; None: nothing to do before :meth:`next_wakeup`."""
+        """The next exchange, committed at once (:meth:`peek` then :meth:`commit`)."""
+        step = self.peek(now)
+        if step is not None:
+            self.commit(step, now)
+        return step
+
+    def peek(self, now: float) -> Step | None:
+        """The next exchange to carry out; None: nothing to do before :meth:`next_wakeup`.
+
+        Nothing changes until :meth:`commit`: the master peeks inside the pause after a
+        reply, and when a command comes in meanwhile it peeks again instead.
+        """
         pending = self._next_command(now)
+        if pending is not None:
+            step = self._command_step(pending)
+        else:
+            choice = self.rotation.peek(now)
+            if choice is None:
+                step = None
+            elif choice.kind is StepKind.POLL:
+                step = Step(StepKind.POLL, self._poll(choice.slot), choice.slot)
+            else:
+                slot = choice.slot
+                probe = self.codec.poll(slot.address, _stopping_only(slot.intent), None)
+                step = Step(StepKind.PROBE, probe, slot)
+        self._peeked = step
+        return step
+
+    def commit(self, step: Step, now: float) -> None:
+        """``step``, the one :meth:`peek` just chose, goes on the wire now."""
+        if step is not self._peeked:
+            raise ValueError("only the step just peeked can be committed")
+        self._peeked = None
+        pending, slot = step.pending, step.slot
         self._in_flight = pending
         if pending is not None:
-            return self._command_step(pending)
-        for slot in self.slots:
-            if slot.deaf_until > now:
-                continue
-            if slot.online is False and slot.next_probe_at <= now:
-                self._undo = (slot, self._next_poll, slot.cursor, None, slot.next_probe_at)
-                slot.next_probe_at = now + self.plan.probe_interval_s
-                exchange = self.codec.poll(slot.address, _stopping_only(slot.intent), None)
-                return Step(StepKind.PROBE, exchange, slot)
-        count = len(self.slots)
-        for offset in range(count):
-            slot = self.slots[(self._next_poll + offset) % count]
-            if slot.online is not False and slot.deaf_until <= now:
-                urgent = slot.urgent_reads[0] if slot.urgent_reads else None
-                self._undo = (slot, self._next_poll, slot.cursor, urgent, slot.next_probe_at)
-                self._next_poll = (self._next_poll + offset + 1) % count
-                return Step(StepKind.POLL, self._poll(slot), slot)
-        return None
-
-    def retract(self, step: Step) -> None:
-        """Take back the poll or probe :meth:`next_step` just chose, not sent yet.
-
-        The master calls this when a command arrived while it waited out the pause: the
-        command goes first, and the poll stays due.
-        """
-        if step.kind is StepKind.COMMAND or self._undo is None or self._undo[0] is not step.slot:
-            raise ValueError("only the poll or probe just chosen can be taken back")
-        slot, next_poll, cursor, urgent, probe_at = self._undo
-        self._next_poll, slot.cursor, slot.next_probe_at = next_poll, cursor, probe_at
-        if urgent is not None:
-            slot.urgent_reads.appendleft(urgent)
-        self._undo = None
+            command = pending.command
+            if command.action.is_control and pending.intent is None:
+                pending.phase = Phase.LEARNING
+                return
+            pending.phase = Phase.SENDING
+            if command.action.is_urgent and pending.intent is not None:
+                # A stop holds from the moment it is sent, even if no reply confirms it.
+                for target in self._targets(slot):
+                    target.intent = _without_reset(pending.intent)
+            return
+        assert slot is not None
+        if step.kind is StepKind.POLL:
+            if slot.urgent_reads:
+                slot.urgent_reads.popleft()
+            else:
+                slot.cursor += 1
+        self.rotation.commit(Choice(step.kind, slot), now)
 
     def next_wakeup(self, now: float) -> float | None:
         """When a probe falls due or a drive is heard again, if nothing else is to do.
 
         None: only a command wakes us.
         """
-        due = [
-            max(s.next_probe_at, s.deaf_until) if s.online is False else s.deaf_until
-            for s in self.slots
-            if s.online is False or s.deaf_until > now
-        ]
-        return min(due) if due else None
+        return self.rotation.next_wakeup(now)
 
     def _next_command(self, now: float) -> Pending | None:
         """The oldest urgent command, else the oldest other one, whose drive can hear it.
@@ -402,12 +357,12 @@ class Planner:
         return None
 
     def _poll(self, slot: DriveSlot) -> Exchange:
+        """The drive's next poll: a condition read it owes, else its rotation's next item."""
         read: ParameterKey | None
         if slot.urgent_reads:
-            read = slot.urgent_reads.popleft()
+            read = slot.urgent_reads[0]
         else:
             read = slot.sequence[slot.cursor % len(slot.sequence)]
-            slot.cursor += 1
         return self.codec.poll(slot.address, slot.intent, read)
 
     def _command_step(self, pending: Pending) -> Step:
@@ -431,10 +386,6 @@ class Planner:
                 base = ControlIntent() if slot is None else _current(slot)
                 pending.intent = _apply(base, command)
             exchanges = self.codec.control(0 if slot is None else slot.address, pending.intent)
-            if command.action.is_urgent:
-                # A stop holds from the moment it is sent, even if no reply confirms it.
-                for target in self._targets(slot):
-                    target.intent = _without_reset(pending.intent)
             exchange = exchanges[pending.part]
         else:
             assert slot is not None  # access commands always name a drive
@@ -480,7 +431,7 @@ class Planner:
         report = Report()
         self._in_flight = None
         slot = step.slot
-        tripped = slot is not None and self._heard(slot, reply, report)
+        tripped = slot is not None and self._heard(slot, step, reply, now, report)
         if step.pending is not None:
             self._advance(step.pending, report, reply)
         if tripped and slot is not None and slot.intent is not None:
@@ -502,21 +453,20 @@ class Planner:
                 return report  # stays at the head of its queue: retried next
             self._finish(pending, report, _result(Outcome.TIMEOUT, reason))
         if slot is not None:
-            slot.failures += 1
-            if slot.online is not False and slot.failures >= self.plan.offline_after:
-                slot.online = False
-                slot.next_probe_at = now + self.plan.probe_interval_s
-                slot.urgent_reads.clear()
-                _forget(slot)  # adopt again when it returns
-                report.transitions.append(Transition(slot.plan, online=False))
+            kind = None if step.kind is StepKind.COMMAND else step.kind
+            # After the deadline a late reply may still be arriving: the line is not free.
+            tail_s = self.plan.wire_s(step.exchange.reply_length) + self.plan.gap_s
+            self.rotation.failed(slot, kind, now, tail_s, report)
+            for transition in report.transitions:  # several at once when the line fell silent
+                demoted = self._by_name[transition.drive.name]
+                demoted.urgent_reads.clear()
+                _forget(demoted)  # adopt again when it returns
         return report
 
-    def _heard(self, slot: DriveSlot, reply: Reply, report: Report) -> bool:
+    def _heard(self, slot: DriveSlot, step: Step, reply: Reply, now: float, report: Report) -> bool:
         """Take in what ``reply`` says about its drive; whether it shows a new trip."""
-        slot.failures = 0
-        if slot.online is not True:
-            slot.online = True
-            report.transitions.append(Transition(slot.plan, online=True))
+        kind = None if step.kind is StepKind.COMMAND else step.kind
+        self.rotation.heard(slot, kind, now, report)
         self._learn(slot, reply)
         if slot.plan.control and slot.intent is None:
             slot.intent = _adopted(slot)
@@ -568,7 +518,7 @@ class Planner:
             )
             return
         if command.action.is_control:
-            if pending.intent is None:
+            if pending.phase is Phase.LEARNING:
                 pending.attempts = 0  # that was a state-learning poll; now the command
                 pending.learned += 1
                 slot = pending.slot
@@ -589,6 +539,7 @@ class Planner:
                     )
                 return
             slot = pending.slot
+            assert pending.intent is not None  # built when the command's own exchange went
             pending.part += 1
             total = len(self.codec.control(0 if slot is None else slot.address, pending.intent))
             if pending.part < total:
@@ -626,7 +577,13 @@ class Planner:
                 break
         else:  # pragma: no cover - a step always serves a queued command
             raise AssertionError("finished a command that was not queued")
+        pending.phase = Phase.ENDED
         report.completions.append(_completion(pending, result))
+
+
+# A command in these phases has sent nothing of its own: a stop may supersede it, a newer
+# reference may replace it.
+_UNSENT = frozenset((Phase.QUEUED, Phase.LEARNING))
 
 
 def _forget(slot: DriveSlot) -> None:

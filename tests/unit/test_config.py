@@ -133,6 +133,12 @@ BAD = [
         "use rfc2217://host:port (got 'rfc2217://server')",
     ),
     (
+        "probes may not take most of the line",
+        _drive_line("      - {name: a, address: 1}", "    probe_share: 0.8\n"),
+        "buses[0].probe_share",
+        "less than or equal to 0.5",
+    ),
+    (
         "no buses at all",
         "http: {listen: 127.0.0.1:8080}\n",
         "buses",
