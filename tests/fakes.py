@@ -131,6 +131,7 @@ class Sent:
     at: float
     data: bytes
     reply_at: float | None = None  # when the last byte of its reply arrives; None: no reply
+    deadline: float | None = None  # the latest a read for its reply waited until
 
 
 @dataclass
@@ -195,6 +196,9 @@ class ScriptedTransport:
         self._reply_until = max(self._reply_until, sent.reply_at)
 
     async def read(self, deadline: float) -> bytes:
+        if self.sent:
+            last = self.sent[-1]
+            last.deadline = deadline if last.deadline is None else max(last.deadline, deadline)
         if self.read_error is not None:
             error, self.read_error = self.read_error, None
             raise error

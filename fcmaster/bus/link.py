@@ -8,6 +8,13 @@ frames and noise are counted and the read goes on. After a timeout it lets the l
 for a reply's length, so a late reply is discarded before the next request instead of
 being taken for its answer. An inter-character gap gives up an unfinished frame.
 
+The deadline for a reply follows the line. Until it has timed a few replies it is the
+plan's conservative one (wire time, response delay and a 50 ms margin); then it is the wire
+time, the drive's response delay (or the answer time measured, if longer) and four times
+the measured spread of answer times, as TCP sets its retransmission timeout, so a lost
+reply costs about two transactions instead of a fixed margin. ``timeout_s`` in the config
+overrides it.
+
 The BusMaster drives a Link from its planner; the commissioning commands (scan, status,
 read, write, control) drive one directly.
 """
@@ -23,6 +30,8 @@ from fcmaster.clock import Clock
 from fcmaster.errors import MalformedReply, ProtocolError, ReplyTimeout, UnexpectedReply
 from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
 from fcmaster.protocol.framing import Frame, SkipReason
+
+ANSWER_SAMPLES = 8  # replies timed before deadlines follow the line
 
 
 class Link:
@@ -50,6 +59,29 @@ class Link:
         self._arrived = 0.0
         self._framer = codec.new_framer()
         self._replied_at: float | None = None
+        # How long replies take beyond their wire time: smoothed mean and mean deviation.
+        self._answer_s = 0.0
+        self._answer_dev_s = 0.0
+        self._answers = 0
+
+    def deadline_s(self, request_length: int, reply_length: int) -> float:
+        """Seconds from writing a request to giving up on its reply."""
+        plan = self.plan
+        fixed = plan.reply_timeout(request_length, reply_length)
+        if plan.timeout_s is not None or self._answers < ANSWER_SAMPLES:
+            return fixed
+        wire = plan.wire_s(request_length + reply_length)
+        answer = max(plan.response_delay_s, self._answer_s)
+        return min(fixed, wire + answer + max(4.0 * self._answer_dev_s, plan.gap_s))
+
+    def _timed(self, answer_s: float) -> None:
+        """Fold one reply's answer time (its latency beyond the wire time) into the estimate."""
+        if self._answers == 0:
+            self._answer_s, self._answer_dev_s = answer_s, answer_s / 2
+        else:
+            self._answer_dev_s += (abs(answer_s - self._answer_s) - self._answer_dev_s) / 4
+            self._answer_s += (answer_s - self._answer_s) / 8
+        self._answers += 1
 
     async def send(self, exchange: Exchange) -> None:
         """Wait for the line to be free, drop stale input, and write the request."""
@@ -82,7 +114,7 @@ class Link:
         """The reply to the request just sent, or None when none came before the deadline."""
         clock, stats, plan = self.clock, self.stats, self.plan
         written_at = self.written_at
-        deadline = written_at + plan.reply_timeout(len(exchange.request), exchange.reply_length)
+        deadline = written_at + self.deadline_s(len(exchange.request), exchange.reply_length)
         reply = await self._read_until(exchange, deadline)
         if reply is None:
             stats.timeouts += 1
@@ -95,6 +127,9 @@ class Link:
             arrived = self.replied_at = max(self._arrived, written_at)
             stats.replies += 1
             stats.latency.observe(arrived - written_at)
+            self._timed(
+                arrived - written_at - plan.wire_s(len(exchange.request) + exchange.reply_length)
+            )
             self._replied_at = arrived
             self.ready_at = arrived + self.pause_s
         stats.busy_s += self.ready_at - written_at

@@ -18,8 +18,9 @@ sleep must be precise for this to hold (see :mod:`fcmaster.clock`). A command th
 during the pause still goes first: the poll chosen before it is taken back.
 
 A port that fails (adapter unplugged, server gone) takes the line down: queued commands end
-``cancelled`` with the reason, and the port is reopened with capped, jittered exponential
-backoff on the injected clock. Other lines are separate BusMasters and never notice.
+``cancelled`` with the reason, and the port is reopened with jittered exponential backoff
+capped at a few seconds, at once when a vanished device node appears again. Other lines
+are separate BusMasters and never notice.
 
 Nothing ends a line silently. An unexpected exception in opening the port or in the loop
 (a bug, a port driver raising what it should not) is logged as ``bus.crashed`` with the
@@ -54,7 +55,7 @@ from fcmaster.protocol.drive import ControlIntent
 log = structlog.get_logger("fcmaster.bus")
 
 BACKOFF_FIRST_S = 0.5
-BACKOFF_MAX_S = 30.0
+BACKOFF_MAX_S = 4.0  # a line is back within seconds of its port, never half a minute
 
 
 class BusObserver(Protocol):
@@ -226,7 +227,7 @@ class BusMaster:
                 attempt += 1
                 self._log.warning("bus.open_failed", error=reason, retry_in_s=round(delay, 2))
                 self._tried.set()
-                await self._clock.sleep(delay)
+                await self._retry_after(delay)
                 continue
             attempt = 0
             now = self._clock.now()
@@ -252,6 +253,22 @@ class BusMaster:
             await self._close_port()
             self.stats.reopens += 1
             await self._clock.sleep(delay)
+
+    async def _retry_after(self, delay: float) -> None:
+        """Wait ``delay``, or less when the port's device node appears (adapter plugged in)."""
+        appeared = getattr(self._transport, "appeared", None)
+        if appeared is None:
+            await self._clock.sleep(delay)
+            return
+        sleeper = asyncio.ensure_future(self._clock.sleep(delay))
+        watcher = asyncio.ensure_future(appeared())
+        try:
+            await asyncio.wait((sleeper, watcher), return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            sleeper.cancel()
+            watcher.cancel()
+        if watcher.done() and not watcher.cancelled():
+            self._log.info("bus.port_appeared")
 
     def _backoff(self, attempt: int) -> float:
         """Capped, jittered exponential backoff: so that many lines do not retry in step."""

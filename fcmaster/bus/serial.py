@@ -39,6 +39,7 @@ log = structlog.get_logger("fcmaster.bus")
 
 _PARITY = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD}
 _PTY_MAJORS = range(136, 144)  # Unix98 pty slaves
+APPEAR_POLL_S = 0.05  # how often a missing device node is looked for while the line is down
 
 
 def is_pty(port: str) -> bool:
@@ -320,6 +321,19 @@ class SerialTransport:
             )
         instance.open()
         return instance
+
+    async def appeared(self) -> None:
+        """Return when the port's device node exists again; never for URLs or present nodes.
+
+        The master waits on this beside its backoff after a failed open, so an adapter that
+        is plugged back in is opened at once. The check runs only while the line is down.
+        """
+        # A stat of a /dev entry never blocks for long, and nothing signals a node appearing
+        # without inotify: polling it while the line is down is the simple way.
+        if "://" in self.port or os.path.exists(self.port):  # noqa: ASYNC240
+            await asyncio.Event().wait()  # nothing to watch: the backoff decides
+        while not os.path.exists(self.port):  # noqa: ASYNC110, ASYNC240
+            await asyncio.sleep(APPEAR_POLL_S)
 
     async def close(self) -> None:
         """Close the port; safe when it is not open."""

@@ -8,11 +8,12 @@ slower than a real line but changes no behaviour.
 import asyncio
 from collections.abc import AsyncIterator
 from contextlib import ExitStack, asynccontextmanager
+from pathlib import Path
 
 import pytest
 
 from fcmaster.bus.commands import Outcome
-from fcmaster.bus.master import BusMaster
+from fcmaster.bus.master import BACKOFF_MAX_S, BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
@@ -143,3 +144,32 @@ async def test_a_line_served_over_tcp_is_polled_and_commanded(over: str) -> None
         await wait_for(lambda: master.stats.reopens >= 1 and master.is_up, timeout_s=10.0)
         await wait_for(lambda: master.stats.replies > replies + 20, timeout_s=10.0)
         assert bridge.clients == 2
+
+
+async def test_an_adapter_plugged_back_in_is_opened_at_once_not_after_the_backoff(
+    tmp_path: Path,
+) -> None:
+    clock = MonotonicClock()
+    line = build_line(
+        LineSettings(baudrate=38400), [(1, DriveSettings(response_delay_s=0.005))], clock=clock
+    )
+    node = tmp_path / "ttyUSB0"
+    plan = LinePlan(
+        name="usb",
+        port=str(node),
+        baudrate=38400,
+        drives=(DrivePlan(name="d1", address=1),),
+        response_delay_s=0.005,
+    )
+    transport = SerialTransport(plan.port, baudrate=38400, parity=plan.parity)
+    master = BusMaster(plan, codec=FcCodec(), transport=transport, clock=clock)
+    async with asyncio.timeout(LIMIT_S), PtyServer(line, clock=clock) as server, master:
+        await asyncio.sleep(3.0)  # the node is missing: the backoff has grown to seconds
+        assert not master.is_up
+        assert "cannot open" in (master.stats.down_reason or "")
+        node.symlink_to(server.device)  # plugged in
+        plugged = clock.now()
+        await wait_for(lambda: master.is_up, timeout_s=BACKOFF_MAX_S)
+        opened_after = clock.now() - plugged
+        await wait_for(lambda: master.planner.slot("d1").online, timeout_s=5.0)
+    assert opened_after < 0.5

@@ -9,12 +9,22 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 
 import pytest
 
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.commands.daemon import longest_probe_wait_s
-from tests.unit.bus.bench import PARAMETER, PAUSE_S, PROCESS, T0, Bench, bench, exchange_s
+from tests.unit.bus.bench import (
+    DELAY_S,
+    PARAMETER,
+    PAUSE_S,
+    PROCESS,
+    T0,
+    Bench,
+    bench,
+    exchange_s,
+)
 from tests.unit.bus.fcdrive import FcDrive
 
 POLL_S = exchange_s(PARAMETER, PARAMETER) + PAUSE_S  # one answered poll, pause included
@@ -32,9 +42,15 @@ def fleet(configured: int, present: int, probe_interval_s: float = 5.0) -> Bench
 
 
 def probe_cost(b: Bench) -> float:
-    """Line time an unanswered probe takes: its deadline, then the drain for a late reply."""
+    """Line time an unanswered probe takes: its deadline, then the drain for a late reply.
+
+    The scripted drives all answer exactly DELAY_S after the wire time, so once the line
+    has timed its replies the deadline is the wire time, that delay and the smallest margin
+    (an inter-character gap).
+    """
     plan = b.plan
-    return plan.reply_timeout(PROCESS, PROCESS) + plan.wire_s(PROCESS) + plan.gap_s
+    deadline = plan.wire_s(2 * PROCESS) + DELAY_S + plan.gap_s
+    return deadline + plan.wire_s(PROCESS) + plan.gap_s
 
 
 async def test_absent_drives_are_probed_within_their_share_and_live_ones_keep_their_rate() -> None:
@@ -60,8 +76,12 @@ async def test_absent_drives_are_probed_within_their_share_and_live_ones_keep_th
     for address in range(1, PRESENT + 1):
         times = [at for at, a in requests if a == address]
         gaps = [after - before for before, after in itertools.pairwise(times)]
-        # Exact spacing: a round of polls, plus a probe's cost when one came in between.
-        assert {round(g, 9) for g in gaps} <= {round(period, 9), round(period + cost, 9)}
+        # Exact spacing: a round of polls, plus a probe's cost for each that came in between
+        # (probes go every ten probe costs, so a round holds one or two of them here).
+        for gap in gaps:
+            probes_between = round((gap - period) / cost)
+            assert gap == approx(period + probes_between * cost)
+            assert probes_between <= math.ceil(period / (cost / 0.1))
         assert max(gaps) <= 3 * period
         rate = (len(times) - 1) / (times[-1] - times[0])
         assert rate >= 0.9 / period
