@@ -12,8 +12,10 @@ The deadline for a reply follows the line. Until it has timed a few replies it i
 plan's conservative one (wire time, response delay and a 50 ms margin); then it is the wire
 time, the drive's response delay (or the answer time measured, if longer) and four times
 the measured spread of answer times, as TCP sets its retransmission timeout, so a lost
-reply costs about two transactions instead of a fixed margin. ``timeout_s`` in the config
-overrides it.
+reply costs about two transactions instead of a fixed margin. That is for polls and probes;
+a command's exchange keeps the fixed deadline, since a drive may take longer over some
+(storing a parameter) and a late answer must not turn a command that was carried out into
+a timeout. ``timeout_s`` in the config overrides both.
 
 The BusMaster drives a Link from its planner; the commissioning commands (scan, status,
 read, write, control) drive one directly.
@@ -110,11 +112,18 @@ class Link:
             )
             stats.busy_s += self.ready_at - written_at
 
-    async def receive(self, exchange: Exchange) -> Reply | None:
-        """The reply to the request just sent, or None when none came before the deadline."""
+    async def receive(self, exchange: Exchange, *, adaptive: bool = True) -> Reply | None:
+        """The reply to the request just sent, or None when none came before the deadline.
+
+        ``adaptive``: the deadline follows the line; otherwise it is the plan's fixed one.
+        """
         clock, stats, plan = self.clock, self.stats, self.plan
         written_at = self.written_at
-        deadline = written_at + self.deadline_s(len(exchange.request), exchange.reply_length)
+        request_length, reply_length = len(exchange.request), exchange.reply_length
+        if adaptive:
+            deadline = written_at + self.deadline_s(request_length, reply_length)
+        else:
+            deadline = written_at + plan.reply_timeout(request_length, reply_length)
         reply = await self._read_until(exchange, deadline)
         if reply is None:
             stats.timeouts += 1

@@ -352,7 +352,8 @@ class BusMaster:
             if not exchange.expects_reply:
                 self._handle(planner.on_sent(step, clock.now()))
                 continue
-            reply = await link.receive(exchange)
+            # Commands wait the plan's fixed deadline: see Link.
+            reply = await link.receive(exchange, adaptive=step.kind is not StepKind.COMMAND)
             now = clock.now()
             if reply is None:
                 self._count_failure(step)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import pytest
 
+from fcmaster.bus.commands import Outcome
 from fcmaster.bus.link import ANSWER_SAMPLES
 from fcmaster.bus.plan import DrivePlan
 from tests.fakes import Sent
@@ -75,3 +76,16 @@ async def test_a_configured_timeout_overrides_the_derived_deadline() -> None:
     async with b.master:
         await b.clock.run_until(T0 + 1.0)
     assert {round(waited(s), 9) for s in b.transport.sent[:-1]} == {0.2}
+
+
+async def test_a_commands_exchange_keeps_the_plans_deadline() -> None:
+    b = bench(M)
+    async with b.master:
+        await b.clock.run_until(T0 + 1.0)
+        count = len(b.transport.sent)
+        result = await b.complete(b.submit(b.master.drive("m").read("16-14")))
+        await b.clock.run_for(0.1)
+    assert result.outcome is Outcome.DONE
+    plan, sent = b.plan, b.transport.sent
+    assert waited(sent[count]) == approx(plan.reply_timeout(PARAMETER, PARAMETER))
+    assert waited(sent[count + 1]) < waited(sent[count])  # polls go on following the line
