@@ -51,15 +51,35 @@ still queued (they end ``cancelled``); a newer reference coalesces into a queued
 end with the newer one's result). Neither touches a command whose step is in flight (the
 last step :meth:`Planner.next_step` handed out and not yet reported back): the drive may
 already be acting on it, and its reply must still find it at the head of its queue.
+
+The planner puts together parts with an interface each: the message types
+(:mod:`~fcmaster.bus.steps`), admission (:mod:`~fcmaster.bus.admission`: what is refused
+before it is queued), queue discipline (:mod:`~fcmaster.bus.queue`), polls, probes and
+liveness (:mod:`~fcmaster.bus.rotation`) and the control-intent algebra
+(:mod:`~fcmaster.bus.intents`). What is left here is a command's way through its exchanges
+and what each reply or failure means for it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections import deque
 
+from fcmaster.bus import admission
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
-from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.bus.intents import (
+    adopted,
+    apply,
+    current,
+    forget,
+    learn,
+    learning_read,
+    needs_learning,
+    restarted,
+    stopping_only,
+    without_reset,
+)
+from fcmaster.bus.plan import LinePlan, OnStart
+from fcmaster.bus.queue import CommandQueue
 from fcmaster.bus.rotation import Choice, Rotation
 from fcmaster.bus.steps import (
     Completion,
@@ -70,8 +90,9 @@ from fcmaster.bus.steps import (
     Step,
     StepKind,
     Transition,
+    completion_of,
+    result_of,
 )
-from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import DriveCodec, Exchange, ParameterKey, Reply
 from fcmaster.protocol.drive import ControlIntent, Motion
 
@@ -86,17 +107,6 @@ __all__ = [
     "StepKind",
     "Transition",
 ]
-
-_STOPPING = (Motion.STOP, Motion.COAST, Motion.QUICK_STOP)
-REFERENCE_LIMIT_PCT = 199.99  # the most a reference can say (FC: 0x7FFF); adoption stays below
-_MOTION_ACTIONS = frozenset(
-    (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE)
-)
-# What one telegram to every drive may carry: whole states, never a change of part of one.
-_BROADCASTS = frozenset((Action.START, Action.STOP, Action.COAST, Action.QUICK_STOP))
-# Actions that change only part of the commanded state, so the rest must be known first
-# (so does a start that keeps the present reference).
-_RELATIVE_ACTIONS = frozenset((Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE, Action.RESET))
 
 
 class Planner:
@@ -118,8 +128,7 @@ class Planner:
                 slot.intent = ControlIntent(Motion.STOP)
             self.slots.append(slot)
             self._by_name[drive.name] = slot
-        self._urgent: deque[Pending] = deque()
-        self._normal: deque[Pending] = deque()
+        self._queue = CommandQueue()
         for slot in self.slots:
             # Where a poll cannot carry the stop that on_start asks for (an ENC frame holds
             # one command), the stop goes out on its own, ahead of everything.
@@ -128,7 +137,7 @@ class Planner:
                 and not codec.poll(slot.address, slot.intent, None).carries_control
             ):
                 stop = Command(action=Action.STOP, actor="on_start")
-                self._urgent.append(Pending(stop, slot, []))
+                self._queue.add(Pending(stop, slot, []), None)
         self.rotation = Rotation(plan, self.slots)
         self._in_flight: Pending | None = None  # the command whose step is on the wire
         self._peeked: Step | None = None  # the step peek chose, until it is committed
@@ -146,116 +155,14 @@ class Planner:
         the wire (invalid, not allowed), or queued motion commands a stop supersedes.
         """
         slot = None if name is None else self._by_name.get(name)
-        refusal = self._refusal(name, slot, command)
+        refusal = admission.refusal(self.codec, self.plan.name, self.slots, name, slot, command)
         if refusal is not None:
             return [Completion((ticket,), command, name or "*", refusal)]
-        pending = Pending(command, slot, [ticket])
-        if command.action.is_urgent:
-            self._urgent.append(pending)
-            return self._supersede(slot, command)
-        if command.action is not Action.SET_REFERENCE or not self._coalesce(pending):
-            self._normal.append(pending)
-        return []
-
-    def _refusal(
-        self, name: str | None, slot: DriveSlot | None, command: Command
-    ) -> CommandResult | None:
-        action = command.action
-        if name is not None and slot is None:
-            return _result(Outcome.INVALID, f"no drive called {name!r} on {self.plan.name}")
-        targets = [slot] if slot is not None else self.slots
-        if slot is None:
-            reason = self._broadcast_refusal(command)
-            if reason:
-                return _result(Outcome.INVALID, reason)
-        if action is Action.WRITE and slot is not None and not slot.plan.control:
-            return _result(
-                Outcome.NOT_ALLOWED,
-                f"{slot.name} is monitor-only: writing its parameters needs control: bus",
-            )
-        if action.is_control:
-            monitor_only = [s.name for s in targets if not s.plan.control]
-            if monitor_only:
-                return _result(
-                    Outcome.NOT_ALLOWED,
-                    f"{', '.join(monitor_only)} is monitor-only (not configured control: bus)",
-                )
-        if command.reference_pct is not None:
-            for target in targets:
-                reason = _beyond_limits(target.plan, command.reference_pct)
-                if reason:
-                    return _result(Outcome.NOT_ALLOWED, reason)
-            try:  # NaN, or beyond what the wire carries: it would fail in next_step instead
-                # As a run: codecs that send the frequency only with a run (ENC) check it then.
-                intent = ControlIntent(Motion.RUN, reference_pct=command.reference_pct)
-                self.codec.control(0 if slot is None else slot.address, intent)
-            except UsageError as exc:
-                return _result(Outcome.INVALID, str(exc))
-        if action in (Action.READ, Action.WRITE) and slot is not None:
-            try:
-                self._build_access(slot, command)
-            except UsageError as exc:
-                return _result(Outcome.INVALID, str(exc))
-        return None
-
-    def _broadcast_refusal(self, command: Command) -> str:
-        """Why ``command`` cannot go to every drive at once ("" when it can)."""
-        if not self.codec.can_broadcast:
-            return f"{self.codec.protocol} has no broadcast; command the drives one by one"
-        if command.action not in _BROADCASTS:
-            allowed = ", ".join(sorted(a.value for a in _BROADCASTS))
-            return f"only {allowed} can be broadcast (one telegram sets every drive alike)"
-        if command.action is Action.START and command.reference_pct is None:
-            return "a broadcast start needs a reference: every drive gets the same one"
-        return ""
-
-    def _supersede(self, slot: DriveSlot | None, command: Command) -> list[Completion]:
-        """A stop makes queued motion commands for the same drive moot.
-
-        A command already on its way (attempted at least once) is left to finish.
-        """
-        ended: list[Completion] = []
-        keep: deque[Pending] = deque()
-        for pending in self._normal:
-            if (
-                pending.command.action in _MOTION_ACTIONS
-                and pending.phase in _UNSENT
-                and pending.attempts == 0
-                and pending is not self._in_flight
-                and (slot is None or pending.slot is slot or pending.slot is None)
-            ):
-                result = _result(Outcome.CANCELLED, f"superseded by {command.action}")
-                ended.append(_completion(pending, result))
-            else:
-                keep.append(pending)
-        self._normal = keep
-        return ended
-
-    def _coalesce(self, pending: Pending) -> bool:
-        # Only into the newest queued command that sets this drive's reference, so that a
-        # start with a reference queued in between cannot end up overriding the newest one;
-        # and only while its telegram is not built yet (not on the wire, not half sent).
-        for queued in reversed(self._normal):
-            if queued.slot is not pending.slot or queued.command.reference_pct is None:
-                continue
-            if (
-                queued.command.action is Action.SET_REFERENCE
-                and queued.phase in _UNSENT
-                and queued.attempts == 0
-                and queued is not self._in_flight
-            ):
-                queued.command = pending.command
-                queued.tickets.extend(pending.tickets)
-                return True
-            return False
-        return False
+        return self._queue.add(Pending(command, slot, [ticket]), self._in_flight)
 
     def cancel_all(self, reason: str) -> list[Completion]:
         """End every queued command as cancelled (shutdown, line lost)."""
-        result = _result(Outcome.CANCELLED, reason)
-        ended = [_completion(p, result) for p in (*self._urgent, *self._normal)]
-        self._urgent.clear()
-        self._normal.clear()
+        ended = self._queue.cancel_all(reason)
         self._in_flight = None
         self._peeked = None
         return ended
@@ -268,7 +175,7 @@ class Planner:
         started again by the master on its own.
         """
         for slot in self.slots:
-            _forget(slot)
+            forget(slot)
         self.rotation.line_down()
 
     @property
@@ -279,7 +186,7 @@ class Planner:
     @property
     def has_commands(self) -> bool:
         """Whether commands are waiting for the line."""
-        return bool(self._urgent or self._normal)
+        return bool(self._queue)
 
     # -- what next -----------------------------------------------------------------------
 
@@ -307,7 +214,7 @@ class Planner:
                 step = Step(StepKind.POLL, self._poll(choice.slot), choice.slot)
             else:
                 slot = choice.slot
-                probe = self.codec.poll(slot.address, _stopping_only(slot.intent), None)
+                probe = self.codec.poll(slot.address, stopping_only(slot.intent), None)
                 step = Step(StepKind.PROBE, probe, slot)
         self._peeked = step
         return step
@@ -328,7 +235,7 @@ class Planner:
             if command.action.is_urgent and pending.intent is not None:
                 # A stop holds from the moment it is sent, even if no reply confirms it.
                 for target in self._targets(slot):
-                    target.intent = _without_reset(pending.intent)
+                    target.intent = without_reset(pending.intent)
             return
         assert slot is not None
         if step.kind is StepKind.POLL:
@@ -350,11 +257,7 @@ class Planner:
 
         A command for a restarting drive waits, without holding up the other drives'.
         """
-        for queue in (self._urgent, self._normal):
-            for pending in queue:
-                if all(target.deaf_until <= now for target in self._targets(pending.slot)):
-                    return pending
-        return None
+        return self._queue.next_ready(now, self._targets)
 
     def _poll(self, slot: DriveSlot) -> Exchange:
         """The drive's next poll: a condition read it owes, else its rotation's next item."""
@@ -368,46 +271,23 @@ class Planner:
     def _command_step(self, pending: Pending) -> Step:
         slot, command = pending.slot, pending.command
         if command.action.is_control:
-            if (
-                pending.intent is None
-                and slot is not None
-                and slot.intent is None
-                and (
-                    command.action in _RELATIVE_ACTIONS
-                    or (command.action is Action.START and command.reference_pct is None)
-                )
-            ):
+            if slot is not None and needs_learning(slot, pending):
                 # Learn what the drive is doing before changing part of it: the status
                 # first, then (for protocols that report the output apart from the status,
                 # such as Mitsubishi) the items of the drive's monitor list in turn.
-                exchange = self.codec.poll(slot.address, None, _learning_read(slot, pending))
+                exchange = self.codec.poll(slot.address, None, learning_read(slot, pending))
                 return Step(StepKind.COMMAND, exchange, slot, pending)
             if pending.intent is None:
-                base = ControlIntent() if slot is None else _current(slot)
-                pending.intent = _apply(base, command)
+                base = ControlIntent() if slot is None else current(slot)
+                pending.intent = apply(base, command)
             exchanges = self.codec.control(0 if slot is None else slot.address, pending.intent)
             exchange = exchanges[pending.part]
         else:
             assert slot is not None  # access commands always name a drive
             if not pending.access:
-                pending.access = self._build_access(slot, command)
+                pending.access = admission.build_access(self.codec, slot, command)
             exchange = pending.access[pending.part]
         return Step(StepKind.COMMAND, exchange, slot, pending)
-
-    def _build_access(self, slot: DriveSlot, command: Command) -> tuple[Exchange, ...]:
-        parameter = self.codec.parameter(command.parameter or "")
-        if command.action is Action.READ:
-            return self.codec.read(slot.address, parameter, command.index, slot.intent)
-        if command.value is None:
-            raise UsageError("write needs a value")
-        return self.codec.write(
-            slot.address,
-            parameter,
-            command.index,
-            command.value,
-            slot.intent,
-            persist=command.persist,
-        )
 
     def _targets(self, slot: DriveSlot | None) -> list[DriveSlot]:
         return [slot] if slot is not None else [s for s in self.slots if s.plan.control]
@@ -423,7 +303,7 @@ class Planner:
         deaf_s = step.exchange.deaf_s
         if deaf_s > 0:
             for target in self._targets(step.slot):
-                _restarted(target, now + deaf_s)
+                restarted(target, now + deaf_s)
         return report
 
     def on_reply(self, step: Step, reply: Reply, now: float) -> Report:
@@ -451,7 +331,7 @@ class Planner:
                 pending.part = 0  # again from the start: what a first exchange selected may be gone
             if pending.attempts <= self.plan.retries:
                 return report  # stays at the head of its queue: retried next
-            self._finish(pending, report, _result(Outcome.TIMEOUT, reason))
+            self._finish(pending, report, result_of(Outcome.TIMEOUT, reason))
         if slot is not None:
             kind = None if step.kind is StepKind.COMMAND else step.kind
             # After the deadline a late reply may still be arriving: the line is not free.
@@ -460,16 +340,16 @@ class Planner:
             for transition in report.transitions:  # several at once when the line fell silent
                 demoted = self._by_name[transition.drive.name]
                 demoted.urgent_reads.clear()
-                _forget(demoted)  # adopt again when it returns
+                forget(demoted)  # adopt again when it returns
         return report
 
     def _heard(self, slot: DriveSlot, step: Step, reply: Reply, now: float, report: Report) -> bool:
         """Take in what ``reply`` says about its drive; whether it shows a new trip."""
         kind = None if step.kind is StepKind.COMMAND else step.kind
         self.rotation.heard(slot, kind, now, report)
-        self._learn(slot, reply)
+        learn(slot, reply)
         if slot.plan.control and slot.intent is None:
-            slot.intent = _adopted(slot)
+            slot.intent = adopted(slot)
         status = reply.status
         if status is None:
             return False
@@ -484,25 +364,6 @@ class Planner:
                 if key not in slot.urgent_reads:
                     slot.urgent_reads.append(key)
         return tripped
-
-    @staticmethod
-    def _learn(slot: DriveSlot, reply: Reply) -> None:
-        """Keep what the drive is doing, for adoption.
-
-        Protocols that read status and output in separate transactions (Mitsubishi, ENC)
-        tell it over several replies.
-        """
-        status = reply.status
-        if status is not None:
-            slot.running = status.running
-            if status.reverse is not None:
-                slot.reverse = status.reverse
-        if reply.output_pct is not None:
-            slot.output_pct = abs(reply.output_pct)
-            if reply.output_pct:
-                slot.reverse = reply.output_pct < 0 if status is None else slot.reverse
-        elif reply.output_frequency_hz is not None and slot.plan.nominal_frequency_hz:
-            slot.output_pct = abs(reply.output_frequency_hz) / slot.plan.nominal_frequency_hz * 100
 
     def _advance(self, pending: Pending, report: Report, reply: Reply | None) -> None:
         command = pending.command
@@ -531,7 +392,7 @@ class Planner:
                     self._finish(
                         pending,
                         report,
-                        _result(
+                        result_of(
                             Outcome.TIMEOUT,
                             f"{slot.name}'s state could not be learned (running, but no "
                             "output reported)",
@@ -546,19 +407,19 @@ class Planner:
                 pending.attempts = 0
                 return
             for target in self._targets(slot):
-                target.intent = _without_reset(pending.intent)
+                target.intent = without_reset(pending.intent)
             if reply is not None and reply.status and not reply.status.accepts_bus_control:
                 self._finish(
                     pending,
                     report,
-                    _result(
+                    result_of(
                         Outcome.REFUSED,
                         "the drive is in local operation and ignores "
                         "bus commands (status word: no bus control)",
                     ),
                 )
                 return
-            self._finish(pending, report, _result(Outcome.DONE, ""))
+            self._finish(pending, report, result_of(Outcome.DONE, ""))
             return
         pending.part += 1
         if pending.part < len(pending.access):
@@ -571,115 +432,5 @@ class Planner:
     def _finish(self, pending: Pending, report: Report, result: CommandResult) -> None:
         # Usually the head of its queue; a command behind one for a restarting drive may
         # have been served first.
-        for queue in (self._urgent, self._normal):
-            if pending in queue:
-                queue.remove(pending)
-                break
-        else:  # pragma: no cover - a step always serves a queued command
-            raise AssertionError("finished a command that was not queued")
-        pending.phase = Phase.ENDED
-        report.completions.append(_completion(pending, result))
-
-
-# A command in these phases has sent nothing of its own: a stop may supersede it, a newer
-# reference may replace it.
-_UNSENT = frozenset((Phase.QUEUED, Phase.LEARNING))
-
-
-def _forget(slot: DriveSlot) -> None:
-    """What the drive was doing is no longer known: keep a stop, drop a motion."""
-    slot.running = slot.output_pct = None
-    if slot.intent is not None and slot.intent.motion not in _STOPPING:
-        slot.intent = None
-
-
-def _restarted(slot: DriveSlot, until: float) -> None:
-    """The drive restarts and hears nothing until ``until``; its output is off."""
-    slot.deaf_until = until
-    slot.running = slot.output_pct = None
-    if slot.intent is not None:
-        slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP, reset=False)
-
-
-def _learning_read(slot: DriveSlot, pending: Pending) -> ParameterKey | None:
-    """What the next state-learning poll reads besides the status (None: status only)."""
-    reads = [key for key in slot.sequence if key is not None]
-    if not pending.learned or not reads:
-        return None
-    return reads[(pending.learned - 1) % len(reads)]
-
-
-def _completion(pending: Pending, result: CommandResult) -> Completion:
-    name = pending.slot.name if pending.slot else "*"
-    return Completion(tuple(pending.tickets), pending.command, name, result)
-
-
-def _result(outcome: Outcome, reason: str) -> CommandResult:
-    return CommandResult(outcome=outcome, reason=reason)
-
-
-def _beyond_limits(drive: DrivePlan, reference_pct: float) -> str:
-    frequency = reference_pct * drive.nominal_frequency_hz / 100.0
-    if abs(frequency) > drive.max_frequency_hz + 1e-9:
-        return (
-            f"{frequency:g} Hz is beyond {drive.name}'s configured limit of "
-            f"{drive.max_frequency_hz:g} Hz"
-        )
-    if frequency and abs(frequency) < drive.min_frequency_hz - 1e-9:
-        return (
-            f"{frequency:g} Hz is below {drive.name}'s configured minimum of "
-            f"{drive.min_frequency_hz:g} Hz"
-        )
-    return ""
-
-
-def _current(slot: DriveSlot) -> ControlIntent:
-    return slot.intent if slot.intent is not None else ControlIntent(Motion.STOP)
-
-
-def _without_reset(intent: ControlIntent) -> ControlIntent:
-    return dataclasses.replace(intent, reset=False) if intent.reset else intent
-
-
-def _stopping_only(intent: ControlIntent | None) -> ControlIntent | None:
-    """A probe keeps commanding a stop but never a motion, so a returning drive is safe."""
-    return intent if intent is not None and intent.motion in _STOPPING else None
-
-
-def _apply(intent: ControlIntent, command: Command) -> ControlIntent:
-    action = command.action
-    reference = intent.reference_pct if command.reference_pct is None else command.reference_pct
-    match action:
-        case Action.START:
-            return ControlIntent(Motion.RUN, intent.reverse, reference)
-        case Action.STOP:
-            return ControlIntent(Motion.STOP, intent.reverse, reference)
-        case Action.COAST:
-            return ControlIntent(Motion.COAST, intent.reverse, reference)
-        case Action.QUICK_STOP:
-            return ControlIntent(Motion.QUICK_STOP, intent.reverse, reference)
-        case Action.JOG:
-            return ControlIntent(Motion.JOG, intent.reverse, reference)
-        case Action.FORWARD:
-            return ControlIntent(intent.motion, False, reference)
-        case Action.REVERSE:
-            return ControlIntent(intent.motion, True, reference)
-        case Action.SET_REFERENCE:
-            return ControlIntent(intent.motion, intent.reverse, reference)
-        case Action.RESET:
-            return ControlIntent(intent.motion, intent.reverse, reference, reset=True)
-    raise AssertionError(f"not a control action: {action}")  # pragma: no cover
-
-
-def _adopted(slot: DriveSlot) -> ControlIntent | None:
-    """The intent that keeps a drive doing what it does now; None while that is not known.
-
-    A running drive is adopted only once its output is known too, so it is never commanded
-    to a reference it is not running at.
-    """
-    if slot.running is False:
-        return ControlIntent(Motion.STOP)
-    if slot.running is None or slot.output_pct is None:
-        return None
-    pct = min(slot.output_pct, REFERENCE_LIMIT_PCT)
-    return ControlIntent(Motion.RUN, slot.reverse, pct)
+        self._queue.remove(pending)
+        report.completions.append(completion_of(pending, result))

@@ -12,7 +12,7 @@ import enum
 from collections import deque
 from dataclasses import dataclass, field
 
-from fcmaster.bus.commands import Command, CommandResult
+from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan
 from fcmaster.protocol.codec import Exchange, ParameterKey
 from fcmaster.protocol.drive import ControlIntent
@@ -116,3 +116,14 @@ class Report:
     completions: list[Completion] = field(default_factory=list)
     transitions: list[Transition] = field(default_factory=list)
     line_silent: bool | None = None  # the line fell silent (True) or answered again (False)
+
+
+def completion_of(pending: Pending, result: CommandResult) -> Completion:
+    """``pending`` ended with ``result``, for every ticket it answers."""
+    name = pending.slot.name if pending.slot else "*"
+    return Completion(tuple(pending.tickets), pending.command, name, result)
+
+
+def result_of(outcome: Outcome, reason: str) -> CommandResult:
+    """A result with no value."""
+    return CommandResult(outcome=outcome, reason=reason)
