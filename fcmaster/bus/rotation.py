@@ -57,6 +57,7 @@ class Rotation:
         self._probe_started = 0.0
         self._probe_budgeted = False
         self._streak: set[int] = set()  # drives (by id) that failed since the line last answered
+        self._answered_before_down: set[int] = set()  # answering when the port was lost
         self.silent = False  # the whole line fell silent
 
     # -- choosing ------------------------------------------------------------------------
@@ -118,6 +119,7 @@ class Rotation:
         """``slot`` answered (``kind``: the step's, None for a command's)."""
         slot.failures = 0
         self._streak.clear()
+        self._answered_before_down.clear()
         if kind is StepKind.PROBE:
             self._probe_ended(now, tail_s=0.0)
         if self.silent:
@@ -148,9 +150,12 @@ class Rotation:
             return
         if slot.online is False or slot.failures < self.plan.offline_after:
             return
-        answering = [s for s in self.slots if s.online is True]
+        # The drives that answered; right after a reopen, those that answered before it.
+        answering = [s for s in self.slots if s.online is True] or [
+            s for s in self.slots if s.online is None and id(s) in self._answered_before_down
+        ]
         if (
-            slot.online is True
+            slot in answering
             and len(answering) >= 2
             and all(id(s) in self._streak for s in answering)
         ):
@@ -163,9 +168,14 @@ class Rotation:
         self._demote(slot, now, report, quick=False)
 
     def line_down(self) -> None:
-        """The port is gone: a line silence ends with it (every drive is adopted anew)."""
+        """The port is gone: a line silence ends with it (every drive is adopted anew).
+
+        Called before the drives lose their online state. If the reopened line is silent,
+        the drives that answered before are taken for a silent line, not demoted one by one.
+        """
         self.silent = False
         self._streak.clear()
+        self._answered_before_down = {id(s) for s in self.slots if s.online is True}
         for slot in self._demoted:
             slot.quick_probe = False
         self._quick = 0

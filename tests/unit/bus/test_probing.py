@@ -139,3 +139,24 @@ def test_the_check_reports_the_longest_wait_for_a_probe_growing_with_the_absent(
     assert longest_probe_wait_s(plan) == pytest.approx(125 * cost / 0.1)
     few = dataclasses.replace(plan, drives=drives[:3])
     assert longest_probe_wait_s(few) == 5.0  # the probe interval, when few are absent
+
+
+async def test_a_line_silent_after_its_port_came_back_is_a_line_fault_too() -> None:
+    b = fleet(4, 4)
+    async with b.master:
+        await b.clock.run_until(T0 + 0.5)
+        in_flight = await b.mid_transaction()
+        b.transport.lost = True
+        for drive in b.drives.values():
+            drive.silent = True  # the adapter is back, the drives' power is not
+        await b.clock.run_until((in_flight.reply_at or 0.0) + 3.0)
+        assert b.master.is_up
+        assert b.master.planner.line_silent
+        assert all(s.quick_probe for s in b.master.planner.slots)
+        for drive in b.drives.values():
+            drive.silent = False
+        back_at = b.clock.now()
+        await b.clock.run_for(0.5)
+    returned = [at for _, online, at in b.observer.availability if online and at > back_at]
+    assert len(returned) == 4
+    assert max(returned) - back_at <= probe_cost(b) + 4 * (exchange_s(PROCESS, PROCESS) + PAUSE_S)
