@@ -11,7 +11,8 @@ being taken for its answer. An inter-character gap gives up an unfinished frame.
 The deadline for a reply follows the line. Until it has timed a few replies it is the
 plan's conservative one (wire time, response delay and a 50 ms margin); then it is the wire
 time, the drive's response delay (or the answer time measured, if longer) and four times
-the measured spread of answer times, as TCP sets its retransmission timeout, so a lost
+the measured spread of answer times (rising fast, falling slowly, and counting replies that
+came after their deadline), as TCP sets its retransmission timeout, so a lost
 reply costs about two transactions instead of a fixed margin. That is for polls and probes;
 a command's exchange keeps the fixed deadline, since a drive may take longer over some
 (storing a parameter) and a late answer must not turn a command that was carried out into
@@ -65,6 +66,7 @@ class Link:
         self._answer_s = 0.0
         self._answer_dev_s = 0.0
         self._answers = 0
+        self._missed: tuple[float, float] | None = None  # the last request timed out: when, wire
 
     def deadline_s(self, request_length: int, reply_length: int) -> float:
         """Seconds from writing a request to giving up on its reply."""
@@ -81,7 +83,12 @@ class Link:
         if self._answers == 0:
             self._answer_s, self._answer_dev_s = answer_s, answer_s / 2
         else:
-            self._answer_dev_s += (abs(answer_s - self._answer_s) - self._answer_dev_s) / 4
+            # The spread rises fast and falls slowly: one slow answer (a loaded host, a USB
+            # adapter's latency timer) keeps the margin wide for a while.
+            error = abs(answer_s - self._answer_s)
+            self._answer_dev_s += (error - self._answer_dev_s) / (
+                4 if error > self._answer_dev_s else 16
+            )
             self._answer_s += (answer_s - self._answer_s) / 8
         self._answers += 1
 
@@ -94,6 +101,12 @@ class Link:
         if stale:
             stats.late_bytes += len(stale)
             self._record("discarded", stale)
+            if self._missed is not None:
+                # Most likely the reply that missed its deadline: how late it really was
+                # counts too, so the deadline widens instead of missing replies again.
+                sent_at, wire = self._missed
+                self._timed(self.transport.received_at - sent_at - wire)
+        self._missed = None
         written_at = self.written_at = clock.now()
         if self._replied_at is not None:
             stats.turnaround.observe(max(0.0, written_at - self._replied_at - self.pause_s))
@@ -128,6 +141,7 @@ class Link:
         if reply is None:
             stats.timeouts += 1
             self._record("timeout", b"")
+            self._missed = (written_at, plan.wire_s(request_length + reply_length))
             # Let a late reply finish arriving, so it is discarded, not misattributed.
             self.ready_at = clock.now() + plan.wire_s(exchange.reply_length) + plan.gap_s
         else:

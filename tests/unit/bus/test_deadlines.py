@@ -12,7 +12,7 @@ import pytest
 from fcmaster.bus.commands import Outcome
 from fcmaster.bus.link import ANSWER_SAMPLES
 from fcmaster.bus.plan import DrivePlan
-from tests.fakes import Sent
+from tests.fakes import Sent, Timed
 from tests.unit.bus.bench import DELAY_S, PARAMETER, PAUSE_S, T0, bench, delayed, exchange_s
 from tests.unit.bus.fcdrive import FcDrive, FcLine
 
@@ -89,3 +89,27 @@ async def test_a_commands_exchange_keeps_the_plans_deadline() -> None:
     plan, sent = b.plan, b.transport.sent
     assert waited(sent[count]) == approx(plan.reply_timeout(PARAMETER, PARAMETER))
     assert waited(sent[count + 1]) < waited(sent[count])  # polls go on following the line
+
+
+async def test_a_reply_that_came_after_its_deadline_widens_the_next_one() -> None:
+    drive = FcDrive(3)
+    line = FcLine(drive)
+    slow = {"left": 0}
+
+    def respond(request: bytes) -> bytes | Timed | None:
+        reply = line(request)
+        if isinstance(reply, bytes) and slow["left"]:
+            slow["left"] -= 1  # a loaded host or an adapter's latency timer: 8 ms more
+            return Timed(((exchange_s(PARAMETER, PARAMETER) + 0.008, reply),))
+        return reply
+
+    b = bench(M, fc=[drive], responder=respond, offline_after=99)
+    async with b.master:
+        await b.clock.run_until(T0 + 2.0)
+        narrow = b.master._link.deadline_s(PARAMETER, PARAMETER)
+        slow["left"] = 2
+        await b.clock.run_for(0.5)
+    stats = b.master.stats
+    assert exchange_s(PARAMETER, PARAMETER) + 0.008 > narrow  # the first slow one misses
+    assert (stats.timeouts, stats.late_bytes, stats.crashes) == (1, PARAMETER, 0)
+    assert stats.replies > 20  # the second slow one, and those after it, are taken
