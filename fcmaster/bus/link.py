@@ -10,9 +10,10 @@ being taken for its answer. An inter-character gap gives up an unfinished frame.
 
 The deadline for a reply follows the line. Until it has timed a few replies it is the
 plan's conservative one (wire time, response delay and a 50 ms margin); then it is the wire
-time, the drive's response delay (or the answer time measured, if longer) and four times
-the measured spread of answer times (rising fast, falling slowly, and counting replies that
-came after their deadline), as TCP sets its retransmission timeout, so a lost
+time, the drive's response delay (or the answer time measured, if longer) and a margin of
+four times the measured spread of answer times (rising fast, falling slowly, and counting
+replies that came after their deadline), as TCP sets its retransmission timeout, but at
+least the answer time once more, so a lost
 reply costs about two transactions instead of a fixed margin. That is for polls and probes;
 a command's exchange keeps the fixed deadline, since a drive may take longer over some
 (storing a parameter) and a late answer must not turn a command that was carried out into
@@ -67,6 +68,7 @@ class Link:
         self._answer_dev_s = 0.0
         self._answers = 0
         self._missed: tuple[float, float] | None = None  # the last request timed out: when, wire
+        self._suspect: tuple[float, float] | None = None  # the one before, its reply not seen
 
     def deadline_s(self, request_length: int, reply_length: int) -> float:
         """Seconds from writing a request to giving up on its reply."""
@@ -76,7 +78,11 @@ class Link:
             return fixed
         wire = plan.wire_s(request_length + reply_length)
         answer = max(plan.response_delay_s, self._answer_s)
-        return min(fixed, wire + answer + max(4.0 * self._answer_dev_s, plan.gap_s))
+        # The margin is at least the answer time itself: a host's scheduling hiccup or an
+        # adapter's latency timer can delay a reply by that much without the spread having
+        # shown it yet.
+        margin = max(4.0 * self._answer_dev_s, self._answer_s, plan.gap_s)
+        return min(fixed, wire + answer + margin)
 
     def _timed(self, answer_s: float) -> None:
         """Fold one reply's answer time (its latency beyond the wire time) into the estimate."""
@@ -106,7 +112,9 @@ class Link:
                 # counts too, so the deadline widens instead of missing replies again.
                 sent_at, wire = self._missed
                 self._timed(self.transport.received_at - sent_at - wire)
-        self._missed = None
+                self._missed = None
+        # A miss not heard of yet may still come, during this exchange: see _drain.
+        self._suspect, self._missed = self._missed, None
         written_at = self.written_at = clock.now()
         if self._replied_at is not None:
             stats.turnaround.observe(max(0.0, written_at - self._replied_at - self.pause_s))
@@ -196,6 +204,13 @@ class Link:
                 except UnexpectedReply:
                     stats.unexpected += 1
                     self._record("unexpected", piece.data)
+                    if self._suspect is not None:
+                        # Likely the previous request's reply, later than even the drain
+                        # allowed for (a device server's network, a busy host): count how
+                        # late, or every reply would go on missing its deadline by one.
+                        sent_at, wire = self._suspect
+                        self._timed(self.transport.received_at - sent_at - wire)
+                        self._suspect = None
                     continue
                 except (MalformedReply, ProtocolError):
                     stats.malformed += 1

@@ -23,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import io
 import os
+import socket
 import termios
 import threading
 import time
@@ -222,6 +223,27 @@ class _ThreadPort:
             self._receiver.connection_lost(exc)
 
 
+class _UrlPort:
+    """pyserial-asyncio's transport on a URL handler with a descriptor (``socket://``).
+
+    Closing it also closes the handler's socket: pyserial's ``close`` leaves it open when
+    the server has already shut the connection (its ``shutdown`` raises first).
+    """
+
+    def __init__(self, transport: _Port, instance: serial.SerialBase) -> None:
+        self._transport = transport
+        # Kept here: pyserial forgets it when its close fails, which may come first (the
+        # transport closes itself when the server goes).
+        self._socket: socket.socket | None = getattr(instance, "_socket", None)
+        self.write = transport.write
+        self.is_closing = transport.is_closing
+
+    def close(self) -> None:
+        self._transport.close()
+        if self._socket is not None:
+            self._socket.close()
+
+
 def _close_quietly(instance: serial.SerialBase) -> None:
     # The RFC 2217 client leaves its socket open when the peer has shut it already.
     sock = getattr(instance, "_socket", None)
@@ -305,7 +327,7 @@ class SerialTransport:
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise PortError(f"cannot use {self.port}: {exc}") from exc
-        return transport
+        return _UrlPort(transport, instance)
 
     def _open_serial(self) -> serial.SerialBase:
         settings = self._settings

@@ -46,10 +46,10 @@ def probe_cost(b: Bench) -> float:
 
     The scripted drives all answer exactly DELAY_S after the wire time, so once the line
     has timed its replies the deadline is the wire time, that delay and the smallest margin
-    (an inter-character gap).
+    (the answer time once more).
     """
     plan = b.plan
-    deadline = plan.wire_s(2 * PROCESS) + DELAY_S + plan.gap_s
+    deadline = plan.wire_s(2 * PROCESS) + 2 * DELAY_S
     return deadline + plan.wire_s(PROCESS) + plan.gap_s
 
 
