@@ -43,6 +43,9 @@ from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.protocol.codec import DriveCodec
 
+# Port URLs the master can drive: the simulator, serial device servers (raw TCP, RFC 2217)
+# and pyserial's local helpers; anything else would fail only when the line first opens.
+_PORT_SCHEMES = ("sim", "socket", "rfc2217", "loop", "spy", "hwgrep", "alt")
 _ENC_KEYS = ("address_encoding", "response_encoding", "fault_encoding")
 _ENV = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-([^}]*))?\}")
 
@@ -82,6 +85,8 @@ class BusModel(_Model):
     response_delay_ms: float = Field(default=10.0, ge=0)
     offline_after: int = Field(default=3, ge=1)
     probe_interval_s: float = Field(default=5.0, gt=0)
+    # the most of the line's time probes of absent drives may take while others answer
+    probe_share: float = Field(default=0.1, gt=0, le=0.5)
     echo: bool = False
     rs485: bool = False
     terminator: Literal["none", "cr", "crlf"] = "cr"  # mitsubishi: as the drive's Pr.124
@@ -426,6 +431,9 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
         where = f"buses[{b}]"
         _unique(bus_names, bus.name, f"{where}.name", "bus name", problems)
         _unique(ports, bus.port, f"{where}.port", "port", problems)
+        port_problem = _port_problem(bus.port)
+        if port_problem:
+            problems.append((f"{where}.port", port_problem))
         codec = codec_for(_line(bus, ()))
         addresses: dict[str, str] = {}
         drives: list[DrivePlan] = []
@@ -579,6 +587,7 @@ def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
         response_delay_s=bus.response_delay_ms / 1000.0,
         offline_after=bus.offline_after,
         probe_interval_s=bus.probe_interval_s,
+        probe_share=bus.probe_share,
         echo=bus.echo,
         rs485=bus.rs485,
         terminator=bus.terminator,
@@ -593,6 +602,24 @@ def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
     # Where the protocol says how long its drives may take (Mitsubishi: the waiting time
     # plus the data check), the reply deadline is derived from it.
     return with_protocol_delay(plan)
+
+
+def _port_problem(port: str) -> str:
+    """What is wrong with a port URL ("" for a device path or a URL the master can open)."""
+    scheme, separator, _rest = port.partition("://")
+    if not separator:
+        return ""
+    if scheme not in _PORT_SCHEMES:
+        listed = ", ".join(f"{s}://" for s in _PORT_SCHEMES)
+        return f"{scheme}:// is not a port this master can open (use a device path or {listed})"
+    if scheme in ("socket", "rfc2217"):
+        try:
+            parts = urlsplit(port)
+            if not parts.hostname or parts.port is None:
+                raise ValueError
+        except ValueError:
+            return f"use {scheme}://host:port (got {port!r})"
+    return ""
 
 
 def _unique(

@@ -131,6 +131,7 @@ class Sent:
     at: float
     data: bytes
     reply_at: float | None = None  # when the last byte of its reply arrives; None: no reply
+    deadline: float | None = None  # the latest a read for its reply waited until
 
 
 @dataclass
@@ -153,6 +154,8 @@ class ScriptedTransport:
     closed: int = 0
     open_attempts: list[float] = field(default_factory=list)
     fail_open: bool = False
+    open_error: Exception | None = None  # raised by the next open (a port driver's bug)
+    read_error: Exception | None = None  # raised by the next read
     lost: bool = False  # the port is gone: writes and reads raise PortError
     received_at: float = 0.0  # when the last bytes read arrived
     _arrivals: list[tuple[float, bytes]] = field(default_factory=list)  # sorted by time
@@ -160,6 +163,9 @@ class ScriptedTransport:
 
     async def open(self) -> None:
         self.open_attempts.append(self.clock.now())
+        if self.open_error is not None:
+            error, self.open_error = self.open_error, None
+            raise error
         if self.fail_open:
             raise PortError("scripted open failure")
         self.opened += 1
@@ -190,6 +196,12 @@ class ScriptedTransport:
         self._reply_until = max(self._reply_until, sent.reply_at)
 
     async def read(self, deadline: float) -> bytes:
+        if self.sent:
+            last = self.sent[-1]
+            last.deadline = deadline if last.deadline is None else max(last.deadline, deadline)
+        if self.read_error is not None:
+            error, self.read_error = self.read_error, None
+            raise error
         if self.lost:
             raise PortError("scripted line loss")
         if self._arrivals and self._arrivals[0][0] <= deadline:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import asyncio
+
 from fcmaster.bus.transport import Transport
 from fcmaster.errors import ReplyTimeout
 
@@ -30,6 +32,14 @@ class EchoCancellingTransport:
     async def close(self) -> None:
         """Close the wrapped transport."""
         await self._inner.close()
+
+    async def appeared(self) -> None:
+        """As the wrapped transport's (a device node that reappears); never if it has none."""
+        appeared = getattr(self._inner, "appeared", None)
+        if appeared is None:
+            await asyncio.Event().wait()
+        else:
+            await appeared()
 
     async def write(self, data: bytes) -> None:
         """Write, and expect ``data`` back first."""

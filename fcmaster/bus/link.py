@@ -8,6 +8,17 @@ frames and noise are counted and the read goes on. After a timeout it lets the l
 for a reply's length, so a late reply is discarded before the next request instead of
 being taken for its answer. An inter-character gap gives up an unfinished frame.
 
+The deadline for a reply follows the line. Until it has timed a few replies it is the
+plan's conservative one (wire time, response delay and a 50 ms margin); then it is the wire
+time, the drive's response delay (or the answer time measured, if longer) and a margin of
+four times the measured spread of answer times (rising fast, falling slowly, and counting
+replies that came after their deadline), as TCP sets its retransmission timeout, but at
+least the answer time once more, so a lost
+reply costs about two transactions instead of a fixed margin. That is for polls and probes;
+a command's exchange keeps the fixed deadline, since a drive may take longer over some
+(storing a parameter) and a late answer must not turn a command that was carried out into
+a timeout. ``timeout_s`` in the config overrides both.
+
 The BusMaster drives a Link from its planner; the commissioning commands (scan, status,
 read, write, control) drive one directly.
 """
@@ -23,6 +34,8 @@ from fcmaster.clock import Clock
 from fcmaster.errors import MalformedReply, ProtocolError, ReplyTimeout, UnexpectedReply
 from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
 from fcmaster.protocol.framing import Frame, SkipReason
+
+ANSWER_SAMPLES = 8  # replies timed before deadlines follow the line
 
 
 class Link:
@@ -50,6 +63,40 @@ class Link:
         self._arrived = 0.0
         self._framer = codec.new_framer()
         self._replied_at: float | None = None
+        # How long replies take beyond their wire time: smoothed mean and mean deviation.
+        self._answer_s = 0.0
+        self._answer_dev_s = 0.0
+        self._answers = 0
+        self._missed: tuple[float, float] | None = None  # the last request timed out: when, wire
+        self._suspect: tuple[float, float] | None = None  # the one before, its reply not seen
+
+    def deadline_s(self, request_length: int, reply_length: int) -> float:
+        """Seconds from writing a request to giving up on its reply."""
+        plan = self.plan
+        fixed = plan.reply_timeout(request_length, reply_length)
+        if plan.timeout_s is not None or self._answers < ANSWER_SAMPLES:
+            return fixed
+        wire = plan.wire_s(request_length + reply_length)
+        answer = max(plan.response_delay_s, self._answer_s)
+        # The margin is at least the answer time itself: a host's scheduling hiccup or an
+        # adapter's latency timer can delay a reply by that much without the spread having
+        # shown it yet.
+        margin = max(4.0 * self._answer_dev_s, self._answer_s, plan.gap_s)
+        return min(fixed, wire + answer + margin)
+
+    def _timed(self, answer_s: float) -> None:
+        """Fold one reply's answer time (its latency beyond the wire time) into the estimate."""
+        if self._answers == 0:
+            self._answer_s, self._answer_dev_s = answer_s, answer_s / 2
+        else:
+            # The spread rises fast and falls slowly: one slow answer (a loaded host, a USB
+            # adapter's latency timer) keeps the margin wide for a while.
+            error = abs(answer_s - self._answer_s)
+            self._answer_dev_s += (error - self._answer_dev_s) / (
+                4 if error > self._answer_dev_s else 16
+            )
+            self._answer_s += (answer_s - self._answer_s) / 8
+        self._answers += 1
 
     async def send(self, exchange: Exchange) -> None:
         """Wait for the line to be free, drop stale input, and write the request."""
@@ -60,6 +107,14 @@ class Link:
         if stale:
             stats.late_bytes += len(stale)
             self._record("discarded", stale)
+            if self._missed is not None:
+                # Most likely the reply that missed its deadline: how late it really was
+                # counts too, so the deadline widens instead of missing replies again.
+                sent_at, wire = self._missed
+                self._timed(self.transport.received_at - sent_at - wire)
+                self._missed = None
+        # A miss not heard of yet may still come, during this exchange: see _drain.
+        self._suspect, self._missed = self._missed, None
         written_at = self.written_at = clock.now()
         if self._replied_at is not None:
             stats.turnaround.observe(max(0.0, written_at - self._replied_at - self.pause_s))
@@ -78,15 +133,23 @@ class Link:
             )
             stats.busy_s += self.ready_at - written_at
 
-    async def receive(self, exchange: Exchange) -> Reply | None:
-        """The reply to the request just sent, or None when none came before the deadline."""
+    async def receive(self, exchange: Exchange, *, adaptive: bool = True) -> Reply | None:
+        """The reply to the request just sent, or None when none came before the deadline.
+
+        ``adaptive``: the deadline follows the line; otherwise it is the plan's fixed one.
+        """
         clock, stats, plan = self.clock, self.stats, self.plan
         written_at = self.written_at
-        deadline = written_at + plan.reply_timeout(len(exchange.request), exchange.reply_length)
+        request_length, reply_length = len(exchange.request), exchange.reply_length
+        if adaptive:
+            deadline = written_at + self.deadline_s(request_length, reply_length)
+        else:
+            deadline = written_at + plan.reply_timeout(request_length, reply_length)
         reply = await self._read_until(exchange, deadline)
         if reply is None:
             stats.timeouts += 1
             self._record("timeout", b"")
+            self._missed = (written_at, plan.wire_s(request_length + reply_length))
             # Let a late reply finish arriving, so it is discarded, not misattributed.
             self.ready_at = clock.now() + plan.wire_s(exchange.reply_length) + plan.gap_s
         else:
@@ -95,6 +158,9 @@ class Link:
             arrived = self.replied_at = max(self._arrived, written_at)
             stats.replies += 1
             stats.latency.observe(arrived - written_at)
+            self._timed(
+                arrived - written_at - plan.wire_s(len(exchange.request) + exchange.reply_length)
+            )
             self._replied_at = arrived
             self.ready_at = arrived + self.pause_s
         stats.busy_s += self.ready_at - written_at
@@ -138,6 +204,13 @@ class Link:
                 except UnexpectedReply:
                     stats.unexpected += 1
                     self._record("unexpected", piece.data)
+                    if self._suspect is not None:
+                        # Likely the previous request's reply, later than even the drain
+                        # allowed for (a device server's network, a busy host): count how
+                        # late, or every reply would go on missing its deadline by one.
+                        sent_at, wire = self._suspect
+                        self._timed(self.transport.received_at - sent_at - wire)
+                        self._suspect = None
                     continue
                 except (MalformedReply, ProtocolError):
                     stats.malformed += 1

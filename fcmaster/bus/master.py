@@ -18,8 +18,15 @@ sleep must be precise for this to hold (see :mod:`fcmaster.clock`). A command th
 during the pause still goes first: the poll chosen before it is taken back.
 
 A port that fails (adapter unplugged, server gone) takes the line down: queued commands end
-``cancelled`` with the reason, and the port is reopened with capped, jittered exponential
-backoff on the injected clock. Other lines are separate BusMasters and never notice.
+``cancelled`` with the reason, and the port is reopened with jittered exponential backoff
+capped at a few seconds, at once when a vanished device node appears again. Other lines
+are separate BusMasters and never notice.
+
+Nothing ends a line silently. An unexpected exception in opening the port or in the loop
+(a bug, a port driver raising what it should not) is logged as ``bus.crashed`` with the
+line's recent frames; the line goes down with the reason (``stats.down_reason``), its
+queued commands end ``cancelled`` with it, and serving restarts after a backoff. What an
+observer raises is logged (``bus.observer_failed``) and never reaches the line.
 """
 
 from __future__ import annotations
@@ -48,7 +55,7 @@ from fcmaster.protocol.drive import ControlIntent
 log = structlog.get_logger("fcmaster.bus")
 
 BACKOFF_FIRST_S = 0.5
-BACKOFF_MAX_S = 30.0
+BACKOFF_MAX_S = 4.0  # a line is back within seconds of its port, never half a minute
 
 
 class BusObserver(Protocol):
@@ -118,7 +125,7 @@ class BusMaster:
         self._tried = asyncio.Event()  # the port has been tried once since __aenter__
         self._task: asyncio.Task[None] | None = None
         self._up = False
-        self._down_reason = "not started"
+        self.stats.down_reason = "not started"
         self._closing = False
         self._deferred: list[Callable[[], None]] = []
         self._log = log.bind(bus=plan.name, port=plan.port)
@@ -161,7 +168,7 @@ class BusMaster:
                         raise
         finally:  # even if the loop died of a bug: every command still gets its one result
             self._up = False
-            self._down_reason = "shut down"
+            self.stats.down_reason = "shut down"
             self.planner.on_line_down()
             self._resolve(self.planner.cancel_all(f"{self.plan.name} shut down"))
             await self._transport.close()
@@ -189,7 +196,7 @@ class BusMaster:
                         name or "*",
                         CommandResult(
                             outcome=Outcome.CANCELLED,
-                            reason=f"{self.plan.name} is down: {self._down_reason}",
+                            reason=f"{self.plan.name} is down: {self.stats.down_reason}",
                         ),
                     )
                 ]
@@ -206,52 +213,132 @@ class BusMaster:
     # -- the loop ------------------------------------------------------------------------
 
     async def _run(self) -> None:
-        attempt = 0
+        """Open, serve, and when either fails, say why, end the queue and try again.
+
+        Nothing ends this loop but :meth:`close`: a lost port is reopened soon, and an
+        unexpected exception (a bug, a port driver raising what it should not) is logged as
+        ``bus.crashed``, takes the line down with that reason and restarts it with backoff.
+        """
+        attempt = 0  # opens that failed in a row
+        crashes = 0  # servings that crashed in a row
         while not self._closing:
             try:
                 await self._transport.open()
-            except PortError as exc:
-                self._down_reason = str(exc)
-                delay = min(BACKOFF_MAX_S, BACKOFF_FIRST_S * 2**attempt)
-                delay *= 0.8 + 0.4 * self._rng.random()
+            except Exception as exc:  # any failure to open is retried
+                reason = str(exc) if isinstance(exc, PortError) else self._crashed("open", exc)
+                self.stats.down_reason = reason
+                delay = self._backoff(attempt)
                 attempt += 1
-                self._log.warning("bus.open_failed", error=str(exc), retry_in_s=round(delay, 2))
+                self._log.warning("bus.open_failed", error=reason, retry_in_s=round(delay, 2))
                 self._tried.set()
-                await self._clock.sleep(delay)
+                await self._retry_after(delay)
                 continue
             attempt = 0
             now = self._clock.now()
             self._up = True
             self.stats.up_since = now
+            self.stats.down_reason = None
             self._log.info("bus.opened")
-            self._observer.line_availability(self.plan.name, True, "", now)
+            self._notify(self._observer.line_availability, self.plan.name, True, "", now)
             self._tried.set()
             try:
                 await self._serve()
             except PortError as exc:
-                self._line_lost(str(exc))
-                await self._transport.close()
-                self.stats.reopens += 1
-                await self._clock.sleep(BACKOFF_FIRST_S * (0.8 + 0.4 * self._rng.random()))
+                self._line_lost(str(exc), f"{self.plan.name} lost its port: {exc}")
+                delay = BACKOFF_FIRST_S * (0.8 + 0.4 * self._rng.random())
+            except Exception as exc:  # supervised: logged, line restarted
+                reason = self._crashed("serve", exc)
+                self._line_lost(reason, f"{self.plan.name} stopped: {reason}")
+                # A serving that lasted a while was not a crash loop: start the backoff over.
+                if self._clock.now() - now > BACKOFF_MAX_S:
+                    crashes = 0
+                delay = self._backoff(crashes)
+                crashes += 1
+            await self._close_port()
+            self.stats.reopens += 1
+            await self._clock.sleep(delay)
 
-    def _line_lost(self, reason: str) -> None:
+    async def _retry_after(self, delay: float) -> None:
+        """Wait ``delay``, or less when the port's device node appears (adapter plugged in)."""
+        appeared = getattr(self._transport, "appeared", None)
+        if appeared is None:
+            await self._clock.sleep(delay)
+            return
+        sleeper = asyncio.ensure_future(self._clock.sleep(delay))
+        watcher = asyncio.ensure_future(appeared())
+        try:
+            await asyncio.wait((sleeper, watcher), return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            sleeper.cancel()
+            watcher.cancel()
+        if watcher.done() and not watcher.cancelled():
+            self._log.info("bus.port_appeared")
+
+    def _backoff(self, attempt: int) -> float:
+        """Capped, jittered exponential backoff: so that many lines do not retry in step."""
+        delay: float = min(BACKOFF_MAX_S, BACKOFF_FIRST_S * 2**attempt)
+        return delay * (0.8 + 0.4 * self._rng.random())
+
+    def _crashed(self, during: str, exc: Exception) -> str:
+        """Log an unexpected exception with the line's recent frames; the reason to show."""
+        self.stats.crashes += 1
+        reason = f"internal error in {during}: {type(exc).__name__}: {exc}"
+        self._log.error(
+            "bus.crashed",
+            during=during,
+            error=f"{type(exc).__name__}: {exc}",
+            recent_frames=self.recent_frames,
+            exc_info=exc,
+        )
+        return reason
+
+    async def _close_port(self) -> None:
+        try:
+            await self._transport.close()
+        except Exception as exc:  # a port that fails to close is reopened
+            self._log.warning("bus.close_failed", error=f"{type(exc).__name__}: {exc}")
+
+    def _line_lost(self, reason: str, cancel_reason: str) -> None:
         self._up = False
-        self._down_reason = reason
+        self.stats.down_reason = reason
         now = self._clock.now()
+        self._flush_deferred()  # the last replies were true when they came: pass them on first
         self._log.warning("bus.lost", error=reason, recent_frames=self.recent_frames)
-        self._resolve(self.planner.cancel_all(f"{self.plan.name} lost its port: {reason}"))
+        self._resolve(self.planner.cancel_all(cancel_reason))
         self.planner.on_line_down()  # when it is back, adopt the drives as at start
+        self.stats.line_silent = False
         for slot in self.planner.slots:
             if slot.online:
                 slot.online = None
-                self._observer.drive_availability(self.plan.name, slot.plan, False, now)
-        self._observer.line_availability(self.plan.name, False, reason, now)
+                self._notify(
+                    self._observer.drive_availability, self.plan.name, slot.plan, False, now
+                )
+        self._notify(self._observer.line_availability, self.plan.name, False, reason, now)
+
+    def _notify(self, call: Callable[..., None], *args: object) -> None:
+        """Tell the observer; what it raises is logged and goes no further than here."""
+        try:
+            call(*args)
+        except Exception as exc:  # an observer's bug must not stop the line
+            self._observer_failed(call, exc)
+
+    def _observer_failed(self, call: Callable[..., None], exc: Exception) -> None:
+        self.stats.observer_errors += 1
+        name = getattr(call, "__name__", None) or getattr(
+            getattr(call, "func", None), "__name__", "?"
+        )
+        self._log.error(
+            "bus.observer_failed",
+            call=name,
+            error=f"{type(exc).__name__}: {exc}",
+            exc_info=exc,
+        )
 
     async def _serve(self) -> None:
         clock, link, planner = self._clock, self._link, self.planner
         while True:
             now = clock.now()
-            step = planner.next_step(now)
+            step = planner.peek(now)
             if step is None:
                 self._flush_deferred()
                 await self._idle(planner.next_wakeup(now))
@@ -260,8 +347,8 @@ class BusMaster:
                 # The next step was chosen (and encoded) inside the pause, where it is free.
                 await clock.sleep_until(link.ready_at)
                 if step.kind is not StepKind.COMMAND and planner.has_commands:
-                    planner.retract(step)  # a command came in meanwhile: it goes first
-                    continue
+                    continue  # a command came in meanwhile: it goes first
+            planner.commit(step, clock.now())
             exchange = step.exchange
             await link.send(exchange)
             self._flush_deferred()  # the layers above get the last reply while this one travels
@@ -269,7 +356,8 @@ class BusMaster:
             if not exchange.expects_reply:
                 self._handle(planner.on_sent(step, clock.now()))
                 continue
-            reply = await link.receive(exchange)
+            # Commands wait the plan's fixed deadline: see Link.
+            reply = await link.receive(exchange, adaptive=step.kind is not StepKind.COMMAND)
             now = clock.now()
             if reply is None:
                 self._count_failure(step)
@@ -312,6 +400,12 @@ class BusMaster:
     def _handle(self, report: Report) -> None:
         self._resolve(report.completions)
         now = self._clock.now()
+        if report.line_silent is not None:
+            self.stats.line_silent = report.line_silent
+            if report.line_silent:
+                self._log.warning("bus.line_silent", recent_frames=self.recent_frames)
+            else:
+                self._log.info("bus.line_answered")
         for transition in report.transitions:
             drive, online = transition.drive, transition.online
             if online:
@@ -342,13 +436,18 @@ class BusMaster:
             for ticket in completion.tickets:
                 if isinstance(ticket, asyncio.Future) and not ticket.done():
                     ticket.set_result(result)
-            self._observer.command_completed(self.plan.name, completion.drive, command, result)
+            self._notify(
+                self._observer.command_completed, self.plan.name, completion.drive, command, result
+            )
 
     def _flush_deferred(self) -> None:
         if self._deferred:
             deferred, self._deferred = self._deferred, []
             for call in deferred:
-                call()
+                try:
+                    call()
+                except Exception as exc:  # the same: isolated from the line
+                    self._observer_failed(call, exc)
 
     @property
     def recent_frames(self) -> list[str]:

@@ -9,13 +9,19 @@ without asyncio. Order of service (DESIGN.md):
 
 1. urgent commands (stop, coast, quick stop), oldest first;
 2. other commands and parameter access, in arrival order;
-3. a probe of a demoted drive, when its slow probe timer is due;
+3. a probe of a demoted drive, when one is due and the probe budget allows;
 4. the idle poll, round-robin over the drives that are not demoted.
 
-Commands are retried up to ``retries`` times, each retry going back to the head of its
-queue so an urgent stop can still come in between. Idle polls are never retried: a failed
-poll counts toward demotion and the round moves on, so a dead drive costs one timeout per
-round until it is demoted, then one per probe interval.
+Polls, probes, demotion, the probe budget and line silence are the
+:class:`~fcmaster.bus.rotation.Rotation`'s. Commands are retried up to ``retries`` times,
+each retry going back to the head of its queue so an urgent stop can still come in between.
+Idle polls are never retried: a failed poll counts toward demotion and the round moves on,
+so a dead drive costs one timeout per round until it is demoted, then one probe in its
+turn, within the probes' share of the line.
+
+Choosing and doing are apart: :meth:`Planner.peek` chooses the next step and changes
+nothing; :meth:`Planner.commit` makes it happen when it goes on the wire. A command's
+lifecycle is its :class:`~fcmaster.bus.steps.Phase`.
 
 Control state. A ``control: bus`` drive carries its commanded :class:`ControlIntent` in
 every exchange, which keeps the drive's control-word watchdog fed. Before the master knows
@@ -45,119 +51,62 @@ still queued (they end ``cancelled``); a newer reference coalesces into a queued
 end with the newer one's result). Neither touches a command whose step is in flight (the
 last step :meth:`Planner.next_step` handed out and not yet reported back): the drive may
 already be acting on it, and its reply must still find it at the head of its queue.
+
+The planner puts together parts with an interface each: the message types
+(:mod:`~fcmaster.bus.steps`), admission (:mod:`~fcmaster.bus.admission`: what is refused
+before it is queued), queue discipline (:mod:`~fcmaster.bus.queue`), polls, probes and
+liveness (:mod:`~fcmaster.bus.rotation`) and the control-intent algebra
+(:mod:`~fcmaster.bus.intents`). What is left here is a command's way through its exchanges
+and what each reply or failure means for it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections import deque
-from dataclasses import dataclass, field
-from enum import Enum
 
+from fcmaster.bus import admission
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
-from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
-from fcmaster.errors import UsageError
+from fcmaster.bus.intents import (
+    adopted,
+    apply,
+    current,
+    forget,
+    learn,
+    learning_read,
+    needs_learning,
+    restarted,
+    stopping_only,
+    without_reset,
+)
+from fcmaster.bus.plan import LinePlan, OnStart
+from fcmaster.bus.queue import CommandQueue
+from fcmaster.bus.rotation import Choice, Rotation
+from fcmaster.bus.steps import (
+    Completion,
+    DriveSlot,
+    Pending,
+    Phase,
+    Report,
+    Step,
+    StepKind,
+    Transition,
+    completion_of,
+    result_of,
+)
 from fcmaster.protocol.codec import DriveCodec, Exchange, ParameterKey, Reply
 from fcmaster.protocol.drive import ControlIntent, Motion
 
-_STOPPING = (Motion.STOP, Motion.COAST, Motion.QUICK_STOP)
-REFERENCE_LIMIT_PCT = 199.99  # the most a reference can say (FC: 0x7FFF); adoption stays below
-_MOTION_ACTIONS = frozenset(
-    (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE)
-)
-# What one telegram to every drive may carry: whole states, never a change of part of one.
-_BROADCASTS = frozenset((Action.START, Action.STOP, Action.COAST, Action.QUICK_STOP))
-# Actions that change only part of the commanded state, so the rest must be known first
-# (so does a start that keeps the present reference).
-_RELATIVE_ACTIONS = frozenset((Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE, Action.RESET))
-
-
-class StepKind(Enum):
-    """Why an exchange is on the wire."""
-
-    COMMAND = "command"
-    POLL = "poll"
-    PROBE = "probe"
-
-
-@dataclass(slots=True, eq=False)
-class DriveSlot:
-    """The bus-side state of one drive."""
-
-    plan: DrivePlan
-    sequence: tuple[ParameterKey | None, ...]
-    intent: ControlIntent | None = None  # what every exchange commands; None: nothing
-    online: bool | None = None  # None until the first reply or demotion
-    failures: int = 0  # consecutive
-    next_probe_at: float = 0.0
-    cursor: int = 0
-    urgent_reads: deque[ParameterKey] = field(default_factory=deque)
-    fault: bool = False
-    warning: bool = False
-    running: bool | None = None  # as the last status said; None: not known yet
-    reverse: bool = False
-    output_pct: float | None = None  # the last output reported, in % of nominal
-    deaf_until: float = 0.0  # restarting (after an inverter reset): nothing goes to it before
-
-    @property
-    def name(self) -> str:
-        """The drive's configured name."""
-        return self.plan.name
-
-    @property
-    def address(self) -> int:
-        """The drive's bus address."""
-        return self.plan.address
-
-
-@dataclass(slots=True, eq=False)
-class Pending:
-    """A command waiting for the line, with every ticket its result answers."""
-
-    command: Command
-    slot: DriveSlot | None  # None: a broadcast to the line
-    tickets: list[object]
-    attempts: int = 0
-    part: int = 0  # which of the command's exchanges is next
-    intent: ControlIntent | None = None  # the intent this command sends, once built
-    access: tuple[Exchange, ...] = ()  # a read's or write's exchanges, once built
-    learned: int = 0  # state-learning polls answered before a relative command
-
-
-@dataclass(slots=True, frozen=True)
-class Step:
-    """One exchange to carry out."""
-
-    kind: StepKind
-    exchange: Exchange
-    slot: DriveSlot | None
-    pending: Pending | None = None
-
-
-@dataclass(slots=True, frozen=True)
-class Completion:
-    """A command that has ended: resolve every ticket with ``result``."""
-
-    tickets: tuple[object, ...]
-    command: Command
-    drive: str
-    result: CommandResult
-
-
-@dataclass(slots=True, frozen=True)
-class Transition:
-    """A drive that went online or offline."""
-
-    drive: DrivePlan
-    online: bool
-
-
-@dataclass(slots=True)
-class Report:
-    """What one reply or failure changed, for the master to pass on."""
-
-    completions: list[Completion] = field(default_factory=list)
-    transitions: list[Transition] = field(default_factory=list)
+__all__ = [
+    "Completion",
+    "DriveSlot",
+    "Pending",
+    "Phase",
+    "Planner",
+    "Report",
+    "Step",
+    "StepKind",
+    "Transition",
+]
 
 
 class Planner:
@@ -179,8 +128,7 @@ class Planner:
                 slot.intent = ControlIntent(Motion.STOP)
             self.slots.append(slot)
             self._by_name[drive.name] = slot
-        self._urgent: deque[Pending] = deque()
-        self._normal: deque[Pending] = deque()
+        self._queue = CommandQueue()
         for slot in self.slots:
             # Where a poll cannot carry the stop that on_start asks for (an ENC frame holds
             # one command), the stop goes out on its own, ahead of everything.
@@ -189,12 +137,10 @@ class Planner:
                 and not codec.poll(slot.address, slot.intent, None).carries_control
             ):
                 stop = Command(action=Action.STOP, actor="on_start")
-                self._urgent.append(Pending(stop, slot, []))
-        self._next_poll = 0
+                self._queue.add(Pending(stop, slot, []), None)
+        self.rotation = Rotation(plan, self.slots)
         self._in_flight: Pending | None = None  # the command whose step is on the wire
-        # how to take back the poll or probe last chosen: slot, round-robin position,
-        # rotation cursor, urgent read taken, probe time
-        self._undo: tuple[DriveSlot, int, int, ParameterKey | None, float] | None = None
+        self._peeked: Step | None = None  # the step peek chose, until it is committed
 
     # -- commands in -------------------------------------------------------------------
 
@@ -209,116 +155,16 @@ class Planner:
         the wire (invalid, not allowed), or queued motion commands a stop supersedes.
         """
         slot = None if name is None else self._by_name.get(name)
-        refusal = self._refusal(name, slot, command)
+        refusal = admission.refusal(self.codec, self.plan.name, self.slots, name, slot, command)
         if refusal is not None:
             return [Completion((ticket,), command, name or "*", refusal)]
-        pending = Pending(command, slot, [ticket])
-        if command.action.is_urgent:
-            self._urgent.append(pending)
-            return self._supersede(slot, command)
-        if command.action is not Action.SET_REFERENCE or not self._coalesce(pending):
-            self._normal.append(pending)
-        return []
-
-    def _refusal(
-        self, name: str | None, slot: DriveSlot | None, command: Command
-    ) -> CommandResult | None:
-        action = command.action
-        if name is not None and slot is None:
-            return _result(Outcome.INVALID, f"no drive called {name!r} on {self.plan.name}")
-        targets = [slot] if slot is not None else self.slots
-        if slot is None:
-            reason = self._broadcast_refusal(command)
-            if reason:
-                return _result(Outcome.INVALID, reason)
-        if action is Action.WRITE and slot is not None and not slot.plan.control:
-            return _result(
-                Outcome.NOT_ALLOWED,
-                f"{slot.name} is monitor-only: writing its parameters needs control: bus",
-            )
-        if action.is_control:
-            monitor_only = [s.name for s in targets if not s.plan.control]
-            if monitor_only:
-                return _result(
-                    Outcome.NOT_ALLOWED,
-                    f"{', '.join(monitor_only)} is monitor-only (not configured control: bus)",
-                )
-        if command.reference_pct is not None:
-            for target in targets:
-                reason = _beyond_limits(target.plan, command.reference_pct)
-                if reason:
-                    return _result(Outcome.NOT_ALLOWED, reason)
-            try:  # NaN, or beyond what the wire carries: it would fail in next_step instead
-                # As a run: codecs that send the frequency only with a run (ENC) check it then.
-                intent = ControlIntent(Motion.RUN, reference_pct=command.reference_pct)
-                self.codec.control(0 if slot is None else slot.address, intent)
-            except UsageError as exc:
-                return _result(Outcome.INVALID, str(exc))
-        if action in (Action.READ, Action.WRITE) and slot is not None:
-            try:
-                self._build_access(slot, command)
-            except UsageError as exc:
-                return _result(Outcome.INVALID, str(exc))
-        return None
-
-    def _broadcast_refusal(self, command: Command) -> str:
-        """Why ``command`` cannot go to every drive at once ("" when it can)."""
-        if not self.codec.can_broadcast:
-            return f"{self.codec.protocol} has no broadcast; command the drives one by one"
-        if command.action not in _BROADCASTS:
-            allowed = ", ".join(sorted(a.value for a in _BROADCASTS))
-            return f"only {allowed} can be broadcast (one telegram sets every drive alike)"
-        if command.action is Action.START and command.reference_pct is None:
-            return "a broadcast start needs a reference: every drive gets the same one"
-        return ""
-
-    def _supersede(self, slot: DriveSlot | None, command: Command) -> list[Completion]:
-        """A stop makes queued motion commands for the same drive moot.
-
-        A command already on its way (attempted at least once) is left to finish.
-        """
-        ended: list[Completion] = []
-        keep: deque[Pending] = deque()
-        for pending in self._normal:
-            if (
-                pending.command.action in _MOTION_ACTIONS
-                and pending.attempts == 0
-                and pending.part == 0
-                and pending is not self._in_flight
-                and (slot is None or pending.slot is slot or pending.slot is None)
-            ):
-                result = _result(Outcome.CANCELLED, f"superseded by {command.action}")
-                ended.append(_completion(pending, result))
-            else:
-                keep.append(pending)
-        self._normal = keep
-        return ended
-
-    def _coalesce(self, pending: Pending) -> bool:
-        # Only into the newest queued command that sets this drive's reference, so that a
-        # start with a reference queued in between cannot end up overriding the newest one;
-        # and only while its telegram is not built yet (not on the wire, not half sent).
-        for queued in reversed(self._normal):
-            if queued.slot is not pending.slot or queued.command.reference_pct is None:
-                continue
-            if (
-                queued.command.action is Action.SET_REFERENCE
-                and queued.attempts == 0
-                and queued.intent is None
-                and queued is not self._in_flight
-            ):
-                queued.command = pending.command
-                queued.tickets.extend(pending.tickets)
-                return True
-            return False
-        return False
+        return self._queue.add(Pending(command, slot, [ticket]), self._in_flight)
 
     def cancel_all(self, reason: str) -> list[Completion]:
         """End every queued command as cancelled (shutdown, line lost)."""
-        result = _result(Outcome.CANCELLED, reason)
-        ended = [_completion(p, result) for p in (*self._urgent, *self._normal)]
-        self._urgent.clear()
-        self._normal.clear()
+        ended = self._queue.cancel_all(reason)
+        self._in_flight = None
+        self._peeked = None
         return ended
 
     def cancel_queued(self, reason: str) -> list[Completion]:
@@ -327,11 +173,7 @@ class Planner:
         At shutdown nothing new may go out: the stops (urgent, always safe) stay, and so
         does the command whose exchange is on the wire, which ends with what the drive says.
         """
-        result = _result(Outcome.CANCELLED, reason)
-        ended = [_completion(p, result) for p in self._normal if p is not self._in_flight]
-        kept = [p for p in self._normal if p is self._in_flight]
-        self._normal = deque(kept)
-        return ended
+        return self._queue.cancel_unsent(reason, self._in_flight)
 
     def on_line_down(self) -> None:
         """The port was lost or shut: adopt each drive again when it is next heard from.
@@ -341,132 +183,119 @@ class Planner:
         started again by the master on its own.
         """
         for slot in self.slots:
-            _forget(slot)
+            forget(slot)
+        self.rotation.line_down()
+
+    @property
+    def line_silent(self) -> bool:
+        """Whether every drive that was answering fell silent together (a line fault)."""
+        return self.rotation.silent
 
     @property
     def has_commands(self) -> bool:
         """Whether commands are waiting for the line."""
-        return bool(self._urgent or self._normal)
+        return bool(self._queue)
 
     # -- what next -----------------------------------------------------------------------
 
     def next_step(self, now: float) -> Step | None:
-        """The next exchange to carry out; None: nothing to do before :meth:`next_wakeup`."""
+        """The next exchange, committed at once (:meth:`peek` then :meth:`commit`)."""
+        step = self.peek(now)
+        if step is not None:
+            self.commit(step, now)
+        return step
+
+    def peek(self, now: float) -> Step | None:
+        """The next exchange to carry out; None: nothing to do before :meth:`next_wakeup`.
+
+        Nothing changes until :meth:`commit`: the master peeks inside the pause after a
+        reply, and when a command comes in meanwhile it peeks again instead.
+        """
         pending = self._next_command(now)
+        if pending is not None:
+            step = self._command_step(pending)
+        else:
+            choice = self.rotation.peek(now)
+            if choice is None:
+                step = None
+            elif choice.kind is StepKind.POLL:
+                step = Step(StepKind.POLL, self._poll(choice.slot), choice.slot)
+            else:
+                slot = choice.slot
+                probe = self.codec.poll(slot.address, stopping_only(slot.intent), None)
+                step = Step(StepKind.PROBE, probe, slot)
+        self._peeked = step
+        return step
+
+    def commit(self, step: Step, now: float) -> None:
+        """``step``, the one :meth:`peek` just chose, goes on the wire now."""
+        if step is not self._peeked:
+            raise ValueError("only the step just peeked can be committed")
+        self._peeked = None
+        pending, slot = step.pending, step.slot
         self._in_flight = pending
         if pending is not None:
-            return self._command_step(pending)
-        for slot in self.slots:
-            if slot.deaf_until > now:
-                continue
-            if slot.online is False and slot.next_probe_at <= now:
-                self._undo = (slot, self._next_poll, slot.cursor, None, slot.next_probe_at)
-                slot.next_probe_at = now + self.plan.probe_interval_s
-                exchange = self.codec.poll(slot.address, _stopping_only(slot.intent), None)
-                return Step(StepKind.PROBE, exchange, slot)
-        count = len(self.slots)
-        for offset in range(count):
-            slot = self.slots[(self._next_poll + offset) % count]
-            if slot.online is not False and slot.deaf_until <= now:
-                urgent = slot.urgent_reads[0] if slot.urgent_reads else None
-                self._undo = (slot, self._next_poll, slot.cursor, urgent, slot.next_probe_at)
-                self._next_poll = (self._next_poll + offset + 1) % count
-                return Step(StepKind.POLL, self._poll(slot), slot)
-        return None
-
-    def retract(self, step: Step) -> None:
-        """Take back the poll or probe :meth:`next_step` just chose, not sent yet.
-
-        The master calls this when a command arrived while it waited out the pause: the
-        command goes first, and the poll stays due.
-        """
-        if step.kind is StepKind.COMMAND or self._undo is None or self._undo[0] is not step.slot:
-            raise ValueError("only the poll or probe just chosen can be taken back")
-        slot, next_poll, cursor, urgent, probe_at = self._undo
-        self._next_poll, slot.cursor, slot.next_probe_at = next_poll, cursor, probe_at
-        if urgent is not None:
-            slot.urgent_reads.appendleft(urgent)
-        self._undo = None
+            command = pending.command
+            if command.action.is_control and pending.intent is None:
+                pending.phase = Phase.LEARNING
+                return
+            pending.phase = Phase.SENDING
+            if command.action.is_urgent and pending.intent is not None:
+                # A stop holds from the moment it is sent, even if no reply confirms it.
+                for target in self._targets(slot):
+                    target.intent = without_reset(pending.intent)
+            return
+        assert slot is not None
+        if step.kind is StepKind.POLL:
+            if slot.urgent_reads:
+                slot.urgent_reads.popleft()
+            else:
+                slot.cursor += 1
+        self.rotation.commit(Choice(step.kind, slot), now)
 
     def next_wakeup(self, now: float) -> float | None:
         """When a probe falls due or a drive is heard again, if nothing else is to do.
 
         None: only a command wakes us.
         """
-        due = [
-            max(s.next_probe_at, s.deaf_until) if s.online is False else s.deaf_until
-            for s in self.slots
-            if s.online is False or s.deaf_until > now
-        ]
-        return min(due) if due else None
+        return self.rotation.next_wakeup(now)
 
     def _next_command(self, now: float) -> Pending | None:
         """The oldest urgent command, else the oldest other one, whose drive can hear it.
 
         A command for a restarting drive waits, without holding up the other drives'.
         """
-        for queue in (self._urgent, self._normal):
-            for pending in queue:
-                if all(target.deaf_until <= now for target in self._targets(pending.slot)):
-                    return pending
-        return None
+        return self._queue.next_ready(now, self._targets)
 
     def _poll(self, slot: DriveSlot) -> Exchange:
+        """The drive's next poll: a condition read it owes, else its rotation's next item."""
         read: ParameterKey | None
         if slot.urgent_reads:
-            read = slot.urgent_reads.popleft()
+            read = slot.urgent_reads[0]
         else:
             read = slot.sequence[slot.cursor % len(slot.sequence)]
-            slot.cursor += 1
         return self.codec.poll(slot.address, slot.intent, read)
 
     def _command_step(self, pending: Pending) -> Step:
         slot, command = pending.slot, pending.command
         if command.action.is_control:
-            if (
-                pending.intent is None
-                and slot is not None
-                and slot.intent is None
-                and (
-                    command.action in _RELATIVE_ACTIONS
-                    or (command.action is Action.START and command.reference_pct is None)
-                )
-            ):
+            if slot is not None and needs_learning(slot, pending):
                 # Learn what the drive is doing before changing part of it: the status
                 # first, then (for protocols that report the output apart from the status,
                 # such as Mitsubishi) the items of the drive's monitor list in turn.
-                exchange = self.codec.poll(slot.address, None, _learning_read(slot, pending))
+                exchange = self.codec.poll(slot.address, None, learning_read(slot, pending))
                 return Step(StepKind.COMMAND, exchange, slot, pending)
             if pending.intent is None:
-                base = ControlIntent() if slot is None else _current(slot)
-                pending.intent = _apply(base, command)
+                base = ControlIntent() if slot is None else current(slot)
+                pending.intent = apply(base, command)
             exchanges = self.codec.control(0 if slot is None else slot.address, pending.intent)
-            if command.action.is_urgent:
-                # A stop holds from the moment it is sent, even if no reply confirms it.
-                for target in self._targets(slot):
-                    target.intent = _without_reset(pending.intent)
             exchange = exchanges[pending.part]
         else:
             assert slot is not None  # access commands always name a drive
             if not pending.access:
-                pending.access = self._build_access(slot, command)
+                pending.access = admission.build_access(self.codec, slot, command)
             exchange = pending.access[pending.part]
         return Step(StepKind.COMMAND, exchange, slot, pending)
-
-    def _build_access(self, slot: DriveSlot, command: Command) -> tuple[Exchange, ...]:
-        parameter = self.codec.parameter(command.parameter or "")
-        if command.action is Action.READ:
-            return self.codec.read(slot.address, parameter, command.index, slot.intent)
-        if command.value is None:
-            raise UsageError("write needs a value")
-        return self.codec.write(
-            slot.address,
-            parameter,
-            command.index,
-            command.value,
-            slot.intent,
-            persist=command.persist,
-        )
 
     def _targets(self, slot: DriveSlot | None) -> list[DriveSlot]:
         return [slot] if slot is not None else [s for s in self.slots if s.plan.control]
@@ -482,7 +311,7 @@ class Planner:
         deaf_s = step.exchange.deaf_s
         if deaf_s > 0:
             for target in self._targets(step.slot):
-                _restarted(target, now + deaf_s)
+                restarted(target, now + deaf_s)
         return report
 
     def on_reply(self, step: Step, reply: Reply, now: float) -> Report:
@@ -490,7 +319,7 @@ class Planner:
         report = Report()
         self._in_flight = None
         slot = step.slot
-        tripped = slot is not None and self._heard(slot, reply, report)
+        tripped = slot is not None and self._heard(slot, step, reply, now, report)
         if step.pending is not None:
             self._advance(step.pending, report, reply)
         if tripped and slot is not None and slot.intent is not None:
@@ -510,26 +339,25 @@ class Planner:
                 pending.part = 0  # again from the start: what a first exchange selected may be gone
             if pending.attempts <= self.plan.retries:
                 return report  # stays at the head of its queue: retried next
-            self._finish(pending, report, _result(Outcome.TIMEOUT, reason))
+            self._finish(pending, report, result_of(Outcome.TIMEOUT, reason))
         if slot is not None:
-            slot.failures += 1
-            if slot.online is not False and slot.failures >= self.plan.offline_after:
-                slot.online = False
-                slot.next_probe_at = now + self.plan.probe_interval_s
-                slot.urgent_reads.clear()
-                _forget(slot)  # adopt again when it returns
-                report.transitions.append(Transition(slot.plan, online=False))
+            kind = None if step.kind is StepKind.COMMAND else step.kind
+            # After the deadline a late reply may still be arriving: the line is not free.
+            tail_s = self.plan.wire_s(step.exchange.reply_length) + self.plan.gap_s
+            self.rotation.failed(slot, kind, now, tail_s, report)
+            for transition in report.transitions:  # several at once when the line fell silent
+                demoted = self._by_name[transition.drive.name]
+                demoted.urgent_reads.clear()
+                forget(demoted)  # adopt again when it returns
         return report
 
-    def _heard(self, slot: DriveSlot, reply: Reply, report: Report) -> bool:
+    def _heard(self, slot: DriveSlot, step: Step, reply: Reply, now: float, report: Report) -> bool:
         """Take in what ``reply`` says about its drive; whether it shows a new trip."""
-        slot.failures = 0
-        if slot.online is not True:
-            slot.online = True
-            report.transitions.append(Transition(slot.plan, online=True))
-        self._learn(slot, reply)
+        kind = None if step.kind is StepKind.COMMAND else step.kind
+        self.rotation.heard(slot, kind, now, report)
+        learn(slot, reply)
         if slot.plan.control and slot.intent is None:
-            slot.intent = _adopted(slot)
+            slot.intent = adopted(slot)
         status = reply.status
         if status is None:
             return False
@@ -545,25 +373,6 @@ class Planner:
                     slot.urgent_reads.append(key)
         return tripped
 
-    @staticmethod
-    def _learn(slot: DriveSlot, reply: Reply) -> None:
-        """Keep what the drive is doing, for adoption.
-
-        Protocols that read status and output in separate transactions (Mitsubishi, ENC)
-        tell it over several replies.
-        """
-        status = reply.status
-        if status is not None:
-            slot.running = status.running
-            if status.reverse is not None:
-                slot.reverse = status.reverse
-        if reply.output_pct is not None:
-            slot.output_pct = abs(reply.output_pct)
-            if reply.output_pct:
-                slot.reverse = reply.output_pct < 0 if status is None else slot.reverse
-        elif reply.output_frequency_hz is not None and slot.plan.nominal_frequency_hz:
-            slot.output_pct = abs(reply.output_frequency_hz) / slot.plan.nominal_frequency_hz * 100
-
     def _advance(self, pending: Pending, report: Report, reply: Reply | None) -> None:
         command = pending.command
         if reply is not None and reply.error is not None:
@@ -578,7 +387,7 @@ class Planner:
             )
             return
         if command.action.is_control:
-            if pending.intent is None:
+            if pending.phase is Phase.LEARNING:
                 pending.attempts = 0  # that was a state-learning poll; now the command
                 pending.learned += 1
                 slot = pending.slot
@@ -591,7 +400,7 @@ class Planner:
                     self._finish(
                         pending,
                         report,
-                        _result(
+                        result_of(
                             Outcome.TIMEOUT,
                             f"{slot.name}'s state could not be learned (running, but no "
                             "output reported)",
@@ -599,25 +408,26 @@ class Planner:
                     )
                 return
             slot = pending.slot
+            assert pending.intent is not None  # built when the command's own exchange went
             pending.part += 1
             total = len(self.codec.control(0 if slot is None else slot.address, pending.intent))
             if pending.part < total:
                 pending.attempts = 0
                 return
             for target in self._targets(slot):
-                target.intent = _without_reset(pending.intent)
+                target.intent = without_reset(pending.intent)
             if reply is not None and reply.status and not reply.status.accepts_bus_control:
                 self._finish(
                     pending,
                     report,
-                    _result(
+                    result_of(
                         Outcome.REFUSED,
                         "the drive is in local operation and ignores "
                         "bus commands (status word: no bus control)",
                     ),
                 )
                 return
-            self._finish(pending, report, _result(Outcome.DONE, ""))
+            self._finish(pending, report, result_of(Outcome.DONE, ""))
             return
         pending.part += 1
         if pending.part < len(pending.access):
@@ -630,109 +440,5 @@ class Planner:
     def _finish(self, pending: Pending, report: Report, result: CommandResult) -> None:
         # Usually the head of its queue; a command behind one for a restarting drive may
         # have been served first.
-        for queue in (self._urgent, self._normal):
-            if pending in queue:
-                queue.remove(pending)
-                break
-        else:  # pragma: no cover - a step always serves a queued command
-            raise AssertionError("finished a command that was not queued")
-        report.completions.append(_completion(pending, result))
-
-
-def _forget(slot: DriveSlot) -> None:
-    """What the drive was doing is no longer known: keep a stop, drop a motion."""
-    slot.running = slot.output_pct = None
-    if slot.intent is not None and slot.intent.motion not in _STOPPING:
-        slot.intent = None
-
-
-def _restarted(slot: DriveSlot, until: float) -> None:
-    """The drive restarts and hears nothing until ``until``; its output is off."""
-    slot.deaf_until = until
-    slot.running = slot.output_pct = None
-    if slot.intent is not None:
-        slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP, reset=False)
-
-
-def _learning_read(slot: DriveSlot, pending: Pending) -> ParameterKey | None:
-    """What the next state-learning poll reads besides the status (None: status only)."""
-    reads = [key for key in slot.sequence if key is not None]
-    if not pending.learned or not reads:
-        return None
-    return reads[(pending.learned - 1) % len(reads)]
-
-
-def _completion(pending: Pending, result: CommandResult) -> Completion:
-    name = pending.slot.name if pending.slot else "*"
-    return Completion(tuple(pending.tickets), pending.command, name, result)
-
-
-def _result(outcome: Outcome, reason: str) -> CommandResult:
-    return CommandResult(outcome=outcome, reason=reason)
-
-
-def _beyond_limits(drive: DrivePlan, reference_pct: float) -> str:
-    frequency = reference_pct * drive.nominal_frequency_hz / 100.0
-    if abs(frequency) > drive.max_frequency_hz + 1e-9:
-        return (
-            f"{frequency:g} Hz is beyond {drive.name}'s configured limit of "
-            f"{drive.max_frequency_hz:g} Hz"
-        )
-    if frequency and abs(frequency) < drive.min_frequency_hz - 1e-9:
-        return (
-            f"{frequency:g} Hz is below {drive.name}'s configured minimum of "
-            f"{drive.min_frequency_hz:g} Hz"
-        )
-    return ""
-
-
-def _current(slot: DriveSlot) -> ControlIntent:
-    return slot.intent if slot.intent is not None else ControlIntent(Motion.STOP)
-
-
-def _without_reset(intent: ControlIntent) -> ControlIntent:
-    return dataclasses.replace(intent, reset=False) if intent.reset else intent
-
-
-def _stopping_only(intent: ControlIntent | None) -> ControlIntent | None:
-    """A probe keeps commanding a stop but never a motion, so a returning drive is safe."""
-    return intent if intent is not None and intent.motion in _STOPPING else None
-
-
-def _apply(intent: ControlIntent, command: Command) -> ControlIntent:
-    action = command.action
-    reference = intent.reference_pct if command.reference_pct is None else command.reference_pct
-    match action:
-        case Action.START:
-            return ControlIntent(Motion.RUN, intent.reverse, reference)
-        case Action.STOP:
-            return ControlIntent(Motion.STOP, intent.reverse, reference)
-        case Action.COAST:
-            return ControlIntent(Motion.COAST, intent.reverse, reference)
-        case Action.QUICK_STOP:
-            return ControlIntent(Motion.QUICK_STOP, intent.reverse, reference)
-        case Action.JOG:
-            return ControlIntent(Motion.JOG, intent.reverse, reference)
-        case Action.FORWARD:
-            return ControlIntent(intent.motion, False, reference)
-        case Action.REVERSE:
-            return ControlIntent(intent.motion, True, reference)
-        case Action.SET_REFERENCE:
-            return ControlIntent(intent.motion, intent.reverse, reference)
-        case Action.RESET:
-            return ControlIntent(intent.motion, intent.reverse, reference, reset=True)
-    raise AssertionError(f"not a control action: {action}")  # pragma: no cover
-
-
-def _adopted(slot: DriveSlot) -> ControlIntent | None:
-    """The intent that keeps a drive doing what it does now; None while that is not known.
-
-    A running drive is adopted only once its output is known too, so it is never commanded
-    to a reference it is not running at.
-    """
-    if slot.running is False:
-        return ControlIntent(Motion.STOP)
-    if slot.running is None or slot.output_pct is None:
-        return None
-    pct = min(slot.output_pct, REFERENCE_LIMIT_PCT)
-    return ControlIntent(Motion.RUN, slot.reverse, pct)
+        self._queue.remove(pending)
+        report.completions.append(completion_of(pending, result))

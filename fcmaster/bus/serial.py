@@ -4,11 +4,12 @@ pyserial opens and configures the port (termios, RS-485 mode). A local port (a U
 adapter, a pty) is then read and written on its file descriptor directly: the event loop's
 reader callback does one non-blocking ``os.read`` straight into a buffer, and a request is
 one ``os.write``. pyserial's own ``read`` and ``write`` would add a ``select()`` to each
-(they implement timeouts), and pyserial-asyncio's reader callback goes through them. Other
-URLs (``socket://``, ``rfc2217://``, …) have no such descriptor and go through
-pyserial-asyncio-fast. Either way a read waits on one future with one timer: no
-StreamReader, no per-read task, so the hot path costs one wake-up per chunk the kernel
-delivers.
+(they implement timeouts), and pyserial-asyncio's reader callback goes through them. URLs
+whose handler has a descriptor of its own (``socket://``) go through pyserial-asyncio-fast.
+Handlers without one (``rfc2217://``, whose client keeps its own socket and reader thread,
+and refuses the write timeout pyserial-asyncio sets) are read in a thread of their own that
+hands each chunk to the loop. Either way a read waits on one future with one timer: no
+StreamReader, no per-read task, so the hot path costs one wake-up per chunk delivered.
 
 Pseudo-terminals refuse some termios changes a UART takes: once parity has been asked for,
 every later reconfiguration of the pty fails with EINVAL. A pty carries no parity bits
@@ -20,8 +21,11 @@ the configured format.
 from __future__ import annotations
 
 import asyncio
+import io
 import os
+import socket
 import termios
+import threading
 import time
 from typing import Any, Protocol
 
@@ -39,6 +43,7 @@ log = structlog.get_logger("fcmaster.bus")
 
 _PARITY = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD}
 _PTY_MAJORS = range(136, 144)  # Unix98 pty slaves
+APPEAR_POLL_S = 0.05  # how often a missing device node is looked for while the line is down
 
 
 def is_pty(port: str) -> bool:
@@ -59,7 +64,11 @@ class _Receiver(asyncio.Protocol):
         self.received_at = 0.0
 
     def data_received(self, data: bytes) -> None:
-        self.received_at = time.monotonic()  # the loop's and MonotonicClock's timebase
+        self.arrived(data, time.monotonic())  # the loop's and MonotonicClock's timebase
+
+    def arrived(self, data: bytes, at: float) -> None:
+        """``data`` arrived at monotonic time ``at`` (seen first in another thread)."""
+        self.received_at = at
         self.buffer += data
         waiter = self.waiter
         if waiter is not None and not waiter.done():
@@ -154,6 +163,109 @@ class _FdPort:
         self._receiver.connection_lost(exc)
 
 
+class _ThreadPort:
+    """A port whose pyserial handler has no descriptor (``rfc2217://``), read in a thread.
+
+    The thread blocks in pyserial's ``read`` and hands each chunk, stamped with the time it
+    was read, to the loop. Writes go straight to the handler: it sends them on a socket,
+    and a request is a few dozen bytes, so the loop does not wait on them.
+    """
+
+    POLL_S = 0.1  # how often the reader thread looks whether the port is being closed
+
+    def __init__(self, instance: serial.SerialBase, receiver: _Receiver) -> None:
+        self._instance = instance
+        self._receiver = receiver
+        self._loop = asyncio.get_running_loop()
+        self._closing = False
+        self._thread = threading.Thread(
+            target=self._read_loop, name=f"serial reader {instance.port}", daemon=True
+        )
+        self._thread.start()
+
+    def _read_loop(self) -> None:
+        instance, loop = self._instance, self._loop
+        try:
+            # Here, not on the loop: an RFC 2217 client waits for the server to agree.
+            instance.timeout = self.POLL_S
+        except Exception as exc:  # whatever ends the port is reported
+            loop.call_soon_threadsafe(self._lost, exc)
+            return
+        while not self._closing:
+            try:
+                data = instance.read(1)
+                if data and (waiting := instance.in_waiting):
+                    data += instance.read(waiting)
+            except Exception as exc:  # whatever ends the port is reported
+                if not self._closing:
+                    loop.call_soon_threadsafe(self._lost, exc)
+                return
+            if data:
+                loop.call_soon_threadsafe(self._receiver.arrived, data, time.monotonic())
+
+    def write(self, data: bytes) -> None:
+        if self._closing:
+            return
+        try:
+            self._instance.write(data)
+        except (serial.SerialException, OSError) as exc:
+            self._lost(exc)
+
+    def is_closing(self) -> bool:
+        return self._closing
+
+    def close(self) -> None:
+        if not self._closing:
+            self._closing = True
+            # pyserial's RFC 2217 client waits for its thread (and 0.3 s more) on close.
+            threading.Thread(target=_close_quietly, args=(self._instance,), daemon=True).start()
+
+    def _lost(self, exc: Exception) -> None:
+        if not self._closing:
+            self.close()
+            self._receiver.connection_lost(exc)
+
+
+class _UrlPort:
+    """pyserial-asyncio's transport on a URL handler with a descriptor (``socket://``).
+
+    Closing it also closes the handler's socket: pyserial's ``close`` leaves it open when
+    the server has already shut the connection (its ``shutdown`` raises first).
+    """
+
+    def __init__(self, transport: _Port, instance: serial.SerialBase) -> None:
+        self._transport = transport
+        # Kept here: pyserial forgets it when its close fails, which may come first (the
+        # transport closes itself when the server goes).
+        self._socket: socket.socket | None = getattr(instance, "_socket", None)
+        self.write = transport.write
+        self.is_closing = transport.is_closing
+
+    def close(self) -> None:
+        self._transport.close()
+        if self._socket is not None:
+            self._socket.close()
+
+
+def _close_quietly(instance: serial.SerialBase) -> None:
+    # The RFC 2217 client leaves its socket open when the peer has shut it already.
+    sock = getattr(instance, "_socket", None)
+    try:
+        instance.close()
+    except Exception as exc:  # closing a port that is gone may fail
+        log.debug("bus.close_failed", port=instance.port, error=str(exc))
+    if sock is not None:
+        sock.close()
+
+
+def _has_descriptor(instance: serial.SerialBase) -> bool:
+    try:
+        instance.fileno()
+    except (AttributeError, NotImplementedError, OSError, io.UnsupportedOperation):
+        return False
+    return True
+
+
 def _expire(waiter: asyncio.Future[None]) -> None:
     if not waiter.done():
         waiter.set_result(None)
@@ -193,29 +305,37 @@ class SerialTransport:
         self._receiver = receiver = _Receiver()
         transport: _Port
         try:
-            if self.port.startswith("socket://"):
-                transport, _ = await serial_asyncio_fast.create_serial_connection(
-                    loop, lambda: receiver, self.port, **self._settings
-                )
-            else:
-                instance = await loop.run_in_executor(None, self._open_serial)
-                # A local POSIX port has a descriptor; URL handlers (spy://, loop://, …)
-                # are other classes, even where they subclass this one.
-                if os.name == "posix" and type(instance) is serial.Serial:
-                    transport = _FdPort(instance, receiver)
-                else:
-                    transport, _ = await serial_asyncio_fast.connection_for_serial(
-                        loop, lambda: receiver, instance
-                    )
+            instance = await loop.run_in_executor(None, self._open_serial)
         except (serial.SerialException, OSError, ValueError, termios.error) as exc:
             if lock_refused(exc):  # another program has it: say who, and touch nothing
                 self.in_use = PortInUse(in_use_message(self.port))
                 raise self.in_use from exc
             raise PortError(open_error(self.port, exc)) from exc
         self.in_use = None
+        try:
+            transport = await self._drive(instance, receiver)
+        except BaseException:
+            instance.close()
+            raise
         self._transport = transport
 
-    def _open_serial(self) -> serial.Serial:
+    async def _drive(self, instance: serial.SerialBase, receiver: _Receiver) -> _Port:
+        """The fastest way to drive the open ``instance`` that it supports."""
+        # A local POSIX port has a descriptor; URL handlers (spy://, loop://, …) are other
+        # classes, even where they subclass this one.
+        if os.name == "posix" and type(instance) is serial.Serial:
+            return _FdPort(instance, receiver)
+        if not _has_descriptor(instance):
+            return _ThreadPort(instance, receiver)
+        try:
+            transport, _ = await serial_asyncio_fast.connection_for_serial(
+                asyncio.get_running_loop(), lambda: receiver, instance
+            )
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise PortError(f"cannot use {self.port}: {exc}") from exc
+        return _UrlPort(transport, instance)
+
+    def _open_serial(self) -> serial.SerialBase:
         settings = self._settings
         if settings["parity"] != serial.PARITY_NONE and is_pty(self.port):
             # A pty refuses every later termios change once parity was asked for (even
@@ -233,6 +353,19 @@ class SerialTransport:
         if os.name == "posix" and type(instance) is serial.Serial:
             self.adapter = tune(self.port, instance.fileno())  # once per open, not per read
         return instance
+
+    async def appeared(self) -> None:
+        """Return when the port's device node exists again; never for URLs or present nodes.
+
+        The master waits on this beside its backoff after a failed open, so an adapter that
+        is plugged back in is opened at once. The check runs only while the line is down.
+        """
+        # A stat of a /dev entry never blocks for long, and nothing signals a node appearing
+        # without inotify: polling it while the line is down is the simple way.
+        if "://" in self.port or os.path.exists(self.port):  # noqa: ASYNC240
+            await asyncio.Event().wait()  # nothing to watch: the backoff decides
+        while not os.path.exists(self.port):  # noqa: ASYNC110, ASYNC240
+            await asyncio.sleep(APPEAR_POLL_S)
 
     async def close(self) -> None:
         """Close the port; safe when it is not open."""

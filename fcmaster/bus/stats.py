@@ -64,6 +64,10 @@ class LineStats:
     noise_bytes: int = 0  # bytes skipped by the framer, checksum failures included
     late_bytes: int = 0  # discarded before a request: late replies, noise between exchanges
     reopens: int = 0
+    crashes: int = 0  # unexpected exceptions that took the line down (logged as bus.crashed)
+    observer_errors: int = 0  # exceptions an observer raised, kept away from the line
+    down_reason: str | None = None  # why the line is down; None while it is up
+    line_silent: bool = False  # every drive that answered fell silent together (a line fault)
     busy_s: float = 0.0  # time with a transaction in progress
     up_since: float | None = None
     latency: Histogram = field(default_factory=lambda: Histogram(LATENCY_BOUNDS))
@@ -90,6 +94,10 @@ class LineStats:
             "noise_bytes": self.noise_bytes,
             "late_bytes": self.late_bytes,
             "reopens": self.reopens,
+            "crashes": self.crashes,
+            "observer_errors": self.observer_errors,
+            "down_reason": self.down_reason,
+            "line_silent": self.line_silent,
             "utilisation": self.utilisation(now),
             "latency_s": self.latency.to_json(),
             "turnaround_s": self.turnaround.to_json(),

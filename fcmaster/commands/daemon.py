@@ -14,6 +14,7 @@ from fcmaster import logsetup
 from fcmaster.bus.adapter import Machine
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import LinePlan
+from fcmaster.bus.rotation import probe_period_s
 from fcmaster.commands.ports import unstable_ports
 from fcmaster.errors import ConfigError, UsageError
 
@@ -44,6 +45,24 @@ def poll_round_s(plan: LinePlan) -> tuple[float, float]:
     return one_round, full_refresh
 
 
+def longest_probe_wait_s(plan: LinePlan) -> float:
+    """The longest an absent drive waits for its probe, with every other drive but one absent.
+
+    Probes keep to ``probe_share`` of the line's time while some drive answers, so the
+    wait grows with the number of absent drives.
+    """
+    if not plan.drives:
+        return 0.0
+    codec = codec_for(plan)
+    probe = codec.poll(plan.drives[0].address, None, None)
+    cost = (
+        plan.reply_timeout(len(probe.request), probe.reply_length)
+        + plan.wire_s(probe.reply_length)
+        + plan.gap_s
+    )
+    return probe_period_s(plan, max(0, len(plan.drives) - 1), cost)
+
+
 def check(path: Path, *, machine: Machine | None = None) -> int:
     """Validate ``path``; print a summary. ConfigError (exit 2) lists every problem.
 
@@ -63,11 +82,19 @@ def check(path: Path, *, machine: Machine | None = None) -> int:
             f"    every drive polled within {one_round * 1000:.1f} ms; "
             f"every monitored value refreshed within {refresh:.2f} s"
         )
+
     model = config.model
     adapters = [
         name for name in ("http", "mqtt", "modbus", "metrics") if getattr(model, name) is not None
     ]
     print(f"  adapters: {', '.join(adapters) or 'none'}; on_shutdown: {model.on_shutdown}")
+    for plan in config.lines:
+        if len(plan.drives) > 1:
+            print(
+                f"  {plan.name}: an absent drive is probed within "
+                f"{longest_probe_wait_s(plan):.1f} s even with all others but one absent "
+                f"(probes take at most {plan.probe_share:.0%} of the line while drives answer)"
+            )
     for unstable in unstable_ports(config.lines, machine):
         print(f"  warning: {unstable.message()}")
     return 0

@@ -7,10 +7,13 @@ slower than a real line but changes no behaviour.
 
 import asyncio
 from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from contextlib import ExitStack, asynccontextmanager
+from pathlib import Path
+
+import pytest
 
 from fcmaster.bus.commands import Outcome
-from fcmaster.bus.master import BusMaster
+from fcmaster.bus.master import BACKOFF_MAX_S, BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
@@ -21,6 +24,7 @@ from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from tests.integration.line_checks import assert_faults_counted_and_no_command_lost
+from tests.integration.tcp_bridge import TcpBridge, tcp_bridge
 from tests.integration.waiting import wait_for
 
 LIMIT_S = 30.0
@@ -33,7 +37,13 @@ async def line_with_master(
     *,
     baudrate: int = 38400,
     drive_faults: dict[int, FaultPlan] | None = None,
+    over: str | None = None,
+    bridges: list[TcpBridge] | None = None,
 ) -> AsyncIterator[tuple[PtyServer, BusMaster]]:
+    """A master on a simulated line: on its pty, or ``over`` a TCP bridge (socket, rfc2217).
+
+    The bridge is appended to ``bridges`` when one is given.
+    """
     clock = MonotonicClock()
     own = drive_faults or {}
     line = build_line(
@@ -46,18 +56,28 @@ async def line_with_master(
         for a in ADDRESSES
     )
     async with asyncio.timeout(LIMIT_S), PtyServer(line, clock=clock) as server:
+        stack = ExitStack()
+        port = server.device
+        if over is not None:
+            bridge = stack.enter_context(tcp_bridge(server.device, rfc2217=over == "rfc2217"))
+            if bridges is not None:
+                bridges.append(bridge)
+            port = bridge.url
         plan = LinePlan(
             name="pty",
-            port=server.device,
+            port=port,
             baudrate=baudrate,
+            # a pty takes no parity; over RFC 2217 the format is set on the bridge's pty
+            parity="E" if over is None else "N",
             drives=drives,
             offline_after=5,
             probe_interval_s=0.5,
             response_delay_s=0.005,
         )
         transport = SerialTransport(plan.port, baudrate=baudrate, parity=plan.parity)
-        async with BusMaster(plan, codec=FcCodec(), transport=transport, clock=clock) as master:
-            yield server, master
+        with stack:
+            async with BusMaster(plan, codec=FcCodec(), transport=transport, clock=clock) as master:
+                yield server, master
 
 
 async def test_every_drive_is_polled_and_a_command_turns_the_motor() -> None:
@@ -97,3 +117,59 @@ async def test_a_silent_drive_is_demoted_probed_and_promoted_again() -> None:
         await wait_for(lambda: slot.online is False, timeout_s=5.0)
         assert master.planner.slot("d3").online  # the others are still polled
         await wait_for(lambda: slot.online is True, timeout_s=8.0)
+
+
+@pytest.mark.parametrize("over", ["socket", "rfc2217"])
+async def test_a_line_served_over_tcp_is_polled_and_commanded(over: str) -> None:
+    """Serial device servers: a raw TCP bridge (socket://) and RFC 2217 (rfc2217://)."""
+    bridges: list[TcpBridge] = []
+    async with line_with_master(FaultPlan(), over=over, bridges=bridges) as (server, master):
+        await wait_for(lambda: all(s.online for s in master.planner.slots))
+        result = await master.drive("d1").start(frequency_hz=25.0)
+        assert result.outcome is Outcome.DONE
+        drive = next(d for d in server.line.drives if d.address == 1)
+        assert isinstance(drive, FcSimDrive)
+        await wait_for(lambda: drive.motor.frequency_hz > 20.0)
+        read = await master.drive("d1").read("16-13")
+        assert read.outcome is Outcome.DONE
+        assert read.value is not None
+        assert 0.0 < float(read.value.value) <= 25.0
+        assert master.stats.checksum_errors == 0
+        (bridge,) = bridges
+        if over == "rfc2217":  # the client set the line's format on the server's port
+            assert (38400, "N") in bridge.settings_seen
+        # The device server restarts: the line goes down, comes back, and serves again.
+        replies = master.stats.replies
+        bridge.drop_client()
+        await wait_for(lambda: master.stats.reopens >= 1 and master.is_up, timeout_s=10.0)
+        await wait_for(lambda: master.stats.replies > replies + 20, timeout_s=10.0)
+        assert bridge.clients == 2
+
+
+async def test_an_adapter_plugged_back_in_is_opened_at_once_not_after_the_backoff(
+    tmp_path: Path,
+) -> None:
+    clock = MonotonicClock()
+    line = build_line(
+        LineSettings(baudrate=38400), [(1, DriveSettings(response_delay_s=0.005))], clock=clock
+    )
+    node = tmp_path / "ttyUSB0"
+    plan = LinePlan(
+        name="usb",
+        port=str(node),
+        baudrate=38400,
+        drives=(DrivePlan(name="d1", address=1),),
+        response_delay_s=0.005,
+    )
+    transport = SerialTransport(plan.port, baudrate=38400, parity=plan.parity)
+    master = BusMaster(plan, codec=FcCodec(), transport=transport, clock=clock)
+    async with asyncio.timeout(LIMIT_S), PtyServer(line, clock=clock) as server, master:
+        await asyncio.sleep(3.0)  # the node is missing: the backoff has grown to seconds
+        assert not master.is_up
+        assert "cannot open" in (master.stats.down_reason or "")
+        node.symlink_to(server.device)  # plugged in
+        plugged = clock.now()
+        await wait_for(lambda: master.is_up, timeout_s=BACKOFF_MAX_S)
+        opened_after = clock.now() - plugged
+        await wait_for(lambda: master.planner.slot("d1").online, timeout_s=5.0)
+    assert opened_after < 0.5

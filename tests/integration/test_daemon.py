@@ -177,6 +177,7 @@ async def test_a_lost_line_goes_down_while_the_other_keeps_polling_and_then_reco
             buses = await until(north_polled_on, "north polling on", alive=daemon)
             assert buses["north"]["up"] is True
             assert buses["south"]["up"] is False
+            assert str(south) in buses["south"]["stats"]["down_reason"]  # why it is down
             assert buses["south"]["stats"]["requests"] == south_requests  # nothing to send on
             drives = by_name(await get_json(viewer, "/api/v1/drives"))
             assert drives["pump-1"]["online"] is True
@@ -203,6 +204,7 @@ async def test_a_lost_line_goes_down_while_the_other_keeps_polling_and_then_reco
 
                 buses = await until(south_back, "south back", alive=daemon)
                 assert buses["south"]["stats"]["reopens"] >= 1
+                assert buses["south"]["stats"]["down_reason"] is None
                 assert buses["north"]["up"] is True
                 stopped = await operator.post(
                     "/api/v1/drives/fan-1/commands", json={"action": "stop"}

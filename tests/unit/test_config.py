@@ -122,6 +122,24 @@ BAD = [
         "above the maximum",
     ),
     (
+        "a port URL the master cannot open",
+        _drive_line("      - {name: a, address: 1}").replace("/dev/ttyUSB0", "tcp://10.0.0.5:4001"),
+        "buses[0].port",
+        "tcp:// is not a port this master can open (use a device path or sim://, socket://",
+    ),
+    (
+        "an RFC 2217 URL without a port number",
+        _drive_line("      - {name: a, address: 1}").replace("/dev/ttyUSB0", "rfc2217://server"),
+        "buses[0].port",
+        "use rfc2217://host:port (got 'rfc2217://server')",
+    ),
+    (
+        "probes may not take most of the line",
+        _drive_line("      - {name: a, address: 1}", "    probe_share: 0.8\n"),
+        "buses[0].probe_share",
+        "less than or equal to 0.5",
+    ),
+    (
         "no buses at all",
         "http: {listen: 127.0.0.1:8080}\n",
         "buses",
@@ -136,6 +154,14 @@ def test_a_bad_config_names_the_key_and_what_is_wrong(
 ) -> None:
     problems = _problems(text)
     assert any(p == path and reason in r for p, r in problems), problems
+
+
+@pytest.mark.parametrize(
+    "port", ["/dev/ttyUSB0", "COM3", "socket://10.0.0.5:4001", "rfc2217://ds.local:2217", "sim://x"]
+)
+def test_device_paths_and_the_urls_the_master_drives_are_accepted(port: str) -> None:
+    config = parse(GOOD.replace("/dev/ttyUSB0", port), env=ENV)
+    assert config.lines[0].port == port
 
 
 def test_every_problem_is_reported_at_once() -> None:

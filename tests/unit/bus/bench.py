@@ -118,6 +118,7 @@ def bench(
     fc: Iterable[FcDrive] | None = None,
     responder: Responder | None = None,
     seed: int = 1,
+    recorder: type[Recorder] = Recorder,
     **options: Any,
 ) -> Bench:
     """A line named ``line1`` with ``drives``; each answered by an FcDrive unless ``fc`` says."""
@@ -125,7 +126,7 @@ def bench(
     clock = VirtualClock(T0)
     fc_drives = list(fc) if fc is not None else [FcDrive(d.address) for d in drives]
     transport = ScriptedTransport(clock, responder or FcLine(*fc_drives), delay_s=DELAY_S)
-    observer = Recorder(transport=transport)
+    observer = recorder(transport=transport)
     master = BusMaster(
         plan,
         codec=FcCodec(),

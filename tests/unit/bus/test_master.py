@@ -62,7 +62,8 @@ def check_half_duplex(b: Bench) -> None:
     sent = b.transport.sent
     for before, after in itertools.pairwise(sent):
         length = len(before.data)
-        deadline = before.at + plan.reply_timeout(length, length)
+        # The deadline the master read until (it follows the line once replies are timed).
+        deadline = before.deadline or before.at + plan.reply_timeout(length, length)
         if before.data[2] == 0x80:  # broadcast
             end = before.at + plan.wire_s(length) + plan.response_delay_s + PAUSE_S
         elif before.reply_at is not None and before.reply_at <= deadline:

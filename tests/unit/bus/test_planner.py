@@ -650,6 +650,7 @@ class PlannerMachine(RuleBasedStateMachine):
         self.last_probe: dict[str, float] = {}
         self.demoted_at: dict[str, float] = {}
         self.polls_since: dict[str, int] = {}
+        self.silenced: set[str] = set()  # demoted when the whole line fell silent
 
     def _ended(self, completions: list[Completion]) -> None:
         for completion in completions:
@@ -665,9 +666,12 @@ class PlannerMachine(RuleBasedStateMachine):
             if transition.online:
                 self.demoted_at.pop(name, None)
                 self.polls_since[name] = 0
+                self.silenced.discard(name)
             else:
                 self.demoted_at[name] = self.now
                 self.polls_since.pop(name, None)
+                if report.line_silent:
+                    self.silenced.add(name)
 
     def _submit(self, name: str | None, command: Command) -> None:
         ticket = len(self.tickets)
@@ -726,7 +730,9 @@ class PlannerMachine(RuleBasedStateMachine):
             assert wakeup is not None
             assert wakeup > self.now
             return
-        if step.kind is StepKind.PROBE:
+        if step.kind is StepKind.PROBE and step.slot is not None and step.slot.quick_probe:
+            assert step.slot.name in self.silenced  # demoted with the whole line
+        elif step.kind is StepKind.PROBE:
             assert step.slot is not None
             name = step.slot.name
             assert self.now >= self.demoted_at[name] + PROBE_INTERVAL_S - 1e-9
@@ -822,6 +828,7 @@ def test_polls_reach_every_drive_and_probes_keep_their_interval(
     p = planner(A, B, M, offline_after=2, probe_interval_s=PROBE_INTERVAL_S)
     now, demoted_at, last_probe = 0.0, dict[str, float](), dict[str, float]()
     polls_since = {name: 0 for name in ("a", "b", "m")}
+    silenced: set[str] = set()  # demoted when the whole line fell silent
     for elapsed, answered in events:
         now += elapsed
         step = p.next_step(now)
@@ -834,7 +841,9 @@ def test_polls_reach_every_drive_and_probes_keep_their_interval(
             continue
         assert step.slot is not None
         name = step.slot.name
-        if step.kind is StepKind.PROBE:
+        if step.kind is StepKind.PROBE and step.slot.quick_probe:
+            assert name in silenced  # demoted with the whole line: asked again at once
+        elif step.kind is StepKind.PROBE:
             assert now >= demoted_at[name] + PROBE_INTERVAL_S
             assert now >= last_probe.get(name, -math.inf) + PROBE_INTERVAL_S
             last_probe[name] = now
@@ -852,9 +861,12 @@ def test_polls_reach_every_drive_and_probes_keep_their_interval(
             who = transition.drive.name
             if transition.online:
                 polls_since[who] = 0
+                silenced.discard(who)
             else:
                 demoted_at[who] = now
                 polls_since.pop(who, None)
+                if report.line_silent:
+                    silenced.add(who)
 
 
 PlannerMachine.TestCase.settings = settings(
@@ -924,16 +936,16 @@ def test_parameter_writes_to_a_monitor_only_drive_are_not_allowed() -> None:
     assert p.submit("m", read, "t") == []  # reading is fine
 
 
-def test_a_retracted_poll_is_chosen_again_after_the_command() -> None:
+def test_a_peeked_poll_left_for_a_command_is_chosen_again_after_it() -> None:
     p = planner(DrivePlan(name="a", address=1), DrivePlan(name="b", address=2))
     first = take(p)
     p.on_reply(first, reply(1), 0.0)
-    poll = take(p)  # b's poll, chosen before the pause
+    poll = p.peek(0.0)  # b's poll, chosen before the pause
+    assert poll is not None
     assert poll.slot is not None
     assert poll.slot.name == "b"
     p.submit("a", Command(action=Action.READ, parameter="16-14"), "t")
-    p.retract(poll)
-    command = take(p)
+    command = take(p)  # peeked again: the command goes first, the poll is not committed
     assert command.kind is StepKind.COMMAND
     p.on_reply(command, reply(1), 0.0)
     again = take(p)
@@ -941,8 +953,8 @@ def test_a_retracted_poll_is_chosen_again_after_the_command() -> None:
     assert again.exchange.request == poll.exchange.request  # same drive, same rotation item
 
 
-def test_only_the_step_just_chosen_can_be_retracted() -> None:
+def test_only_the_step_just_peeked_can_be_committed() -> None:
     p = planner(DrivePlan(name="a", address=1))
     p.submit("a", Command(action=Action.READ, parameter="16-14"), "t")
-    with pytest.raises(ValueError, match="only the poll or probe"):
-        p.retract(take(p))
+    with pytest.raises(ValueError, match="only the step just peeked"):
+        p.commit(take(p), 0.0)  # already committed

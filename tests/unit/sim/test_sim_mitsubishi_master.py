@@ -7,6 +7,8 @@ drive's own communication check tripping it once the master goes away.
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
@@ -32,7 +34,7 @@ PLAN = LinePlan(
 
 
 def master_on_sim(
-    clock: VirtualClock, faults: FaultPlan | None = None, **parameters: float
+    clock: VirtualClock, faults: FaultPlan | None = None, retries: int = 1, **parameters: float
 ) -> tuple[BusMaster, list[MitsubishiSimDrive]]:
     settings = DriveSettings(parameters={k.replace("_", "."): v for k, v in parameters.items()})
     line = build_line(
@@ -40,7 +42,7 @@ def master_on_sim(
         [(0, settings), (5, settings)],
         clock=clock,
     )
-    plan = with_protocol_delay(PLAN)  # as the config derives it
+    plan = with_protocol_delay(dataclasses.replace(PLAN, retries=retries))  # as the config does
     master = BusMaster(
         plan, codec=codec_for(plan), transport=SimTransport(line, clock), clock=clock
     )
@@ -120,7 +122,10 @@ async def test_the_drives_watchdog_trips_it_once_the_master_is_gone() -> None:
 
 async def test_lost_and_corrupted_replies_are_counted_and_ridden_out() -> None:
     clock = VirtualClock()
-    master, _ = master_on_sim(clock, FaultPlan(drop=0.1, corrupt=0.1, seed=3), Pr_121=9999)
+    # A read is two exchanges (page select, read); with a fifth of the replies lost or
+    # corrupted, one retry for both is not enough to ride it out.
+    faults = FaultPlan(drop=0.1, corrupt=0.1, seed=3)
+    master, _ = master_on_sim(clock, faults, retries=3, Pr_121=9999)
     async with master:
         await clock.run_for(1.0)
         read = await clock.complete(master.drive("d5").read("Pr.7"))

@@ -1,0 +1,202 @@
+"""Which drive the line serves when no command waits, and which drives count as present.
+
+Polls go round-robin over the drives that are not demoted. A drive that fails
+``offline_after`` times in a row is demoted and from then on only probed. Probes are held
+to a budget: they take at most ``probe_share`` of the line's time while there are drives
+to poll, one at a time, the longest-waiting first, so many absent drives never fall due
+together and starve the present ones. Each absent drive still gets its probe, at the
+latest after every other absent drive has had one (:func:`probe_period_s`). With nothing
+to poll (every drive absent) the budget does not apply: the line has nothing better to do.
+
+When every drive that was answering falls silent together, it is the line (a cable, the
+adapter, the power) rather than the drives: they are reported offline but probed one after
+the other at once, not at the slow probe interval, and as soon as anything answers the
+rest are probed straight away, so the whole line is back within about one poll round.
+
+:meth:`Rotation.peek` chooses without changing anything; :meth:`Rotation.commit` makes the
+choice happen. The master peeks before the pause after a reply, and a command that comes in
+during the pause goes first with nothing to undo.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from fcmaster.bus.plan import LinePlan
+from fcmaster.bus.steps import DriveSlot, Report, StepKind, Transition
+
+
+@dataclass(slots=True, frozen=True)
+class Choice:
+    """A poll or a probe, chosen and not yet made."""
+
+    kind: StepKind
+    slot: DriveSlot
+
+
+def probe_period_s(plan: LinePlan, absent: int, probe_s: float) -> float:
+    """The longest wait between two probes of an absent drive, with ``absent`` drives absent.
+
+    ``probe_s`` is what one unanswered probe costs the line.
+    """
+    return max(plan.probe_interval_s, absent * probe_s / plan.probe_share)
+
+
+class Rotation:
+    """Poll rotation, demotion, the probe budget and line silence for one line's drives."""
+
+    def __init__(self, plan: LinePlan, slots: list[DriveSlot]) -> None:
+        self.plan = plan
+        self.slots = slots
+        self._index = {id(slot): i for i, slot in enumerate(slots)}
+        self._next_poll = 0
+        self._demoted: list[DriveSlot] = []
+        self._quick = 0  # demoted drives with quick_probe set
+        self._probe_ready_at = -math.inf  # no budgeted probe before this
+        self._probe_started = 0.0
+        self._probe_budgeted = False
+        self._streak: set[int] = set()  # drives (by id) that failed since the line last answered
+        self._answered_before_down: set[int] = set()  # answering when the port was lost
+        self.silent = False  # the whole line fell silent
+
+    # -- choosing ------------------------------------------------------------------------
+
+    def peek(self, now: float) -> Choice | None:
+        """The poll or probe due now, if any; nothing changes until :meth:`commit`."""
+        slots = self.slots
+        count = len(slots)
+        poll = None
+        for offset in range(count):
+            slot = slots[(self._next_poll + offset) % count]
+            if slot.online is not False and slot.deaf_until <= now:
+                poll = slot
+                break
+        if self._demoted and (poll is None or self._quick or now >= self._probe_ready_at):
+            probe = self._due_probe(now, budgeted=poll is not None)
+            if probe is not None:
+                return Choice(StepKind.PROBE, probe)
+        return None if poll is None else Choice(StepKind.POLL, poll)
+
+    def _due_probe(self, now: float, *, budgeted: bool) -> DriveSlot | None:
+        """The demoted drive to probe now: quick ones first, then the longest waiting."""
+        best: DriveSlot | None = None
+        for slot in self._demoted:
+            if slot.next_probe_at > now or slot.deaf_until > now:
+                continue
+            if budgeted and not slot.quick_probe and now < self._probe_ready_at:
+                continue
+            if best is None or (not slot.quick_probe, slot.next_probe_at) < (
+                not best.quick_probe,
+                best.next_probe_at,
+            ):
+                best = slot
+        return best
+
+    def commit(self, choice: Choice, now: float) -> None:
+        """The chosen poll or probe goes on the wire now."""
+        slot = choice.slot
+        if choice.kind is StepKind.POLL:
+            self._next_poll = (self._index[id(slot)] + 1) % len(self.slots)
+            return
+        self._probe_started = now
+        self._probe_budgeted = not slot.quick_probe
+        # A quick probe goes to the back of the quick ones; others wait their interval.
+        slot.next_probe_at = now if slot.quick_probe else now + self.plan.probe_interval_s
+
+    def next_wakeup(self, now: float) -> float | None:
+        """When a probe falls due or a drive is heard again, if nothing else is to do."""
+        due = [
+            max(s.next_probe_at, s.deaf_until) if s.online is False else s.deaf_until
+            for s in self.slots
+            if s.online is False or s.deaf_until > now
+        ]
+        return min(due) if due else None
+
+    # -- what happened -------------------------------------------------------------------
+
+    def heard(self, slot: DriveSlot, kind: StepKind | None, now: float, report: Report) -> None:
+        """``slot`` answered (``kind``: the step's, None for a command's)."""
+        slot.failures = 0
+        self._streak.clear()
+        self._answered_before_down.clear()
+        if kind is StepKind.PROBE:
+            self._probe_ended(now, tail_s=0.0)
+        if self.silent:
+            self.silent = False
+            report.line_silent = False
+            for other in self._demoted:
+                if other.quick_probe:
+                    other.next_probe_at = now  # the line is back: ask each of them at once
+        if slot.online is not True:
+            if slot.online is False:
+                self._undemote(slot)
+            slot.online = True
+            report.transitions.append(Transition(slot.plan, online=True))
+
+    def failed(
+        self, slot: DriveSlot, kind: StepKind | None, now: float, tail_s: float, report: Report
+    ) -> None:
+        """``slot`` did not answer; ``tail_s``: the line time still to pass (a late reply)."""
+        slot.failures += 1
+        self._streak.add(id(slot))
+        if kind is StepKind.PROBE:
+            self._probe_ended(now, tail_s)
+            if slot.quick_probe and not self.silent:
+                # Asked again once the line was back, and still silent: a drive of its own.
+                slot.quick_probe = False
+                self._quick -= 1
+                slot.next_probe_at = now + self.plan.probe_interval_s
+            return
+        if slot.online is False or slot.failures < self.plan.offline_after:
+            return
+        # The drives that answered; right after a reopen, those that answered before it.
+        answering = [s for s in self.slots if s.online is True] or [
+            s for s in self.slots if s.online is None and id(s) in self._answered_before_down
+        ]
+        if (
+            slot in answering
+            and len(answering) >= 2
+            and all(id(s) in self._streak for s in answering)
+        ):
+            # Everything that answered went quiet together: the line, not the drives.
+            self.silent = True
+            report.line_silent = True
+            for other in answering:
+                self._demote(other, now, report, quick=True)
+            return
+        self._demote(slot, now, report, quick=False)
+
+    def line_down(self) -> None:
+        """The port is gone: a line silence ends with it (every drive is adopted anew).
+
+        Called before the drives lose their online state. If the reopened line is silent,
+        the drives that answered before are taken for a silent line, not demoted one by one.
+        """
+        self.silent = False
+        self._streak.clear()
+        self._answered_before_down = {id(s) for s in self.slots if s.online is True}
+        for slot in self._demoted:
+            slot.quick_probe = False
+        self._quick = 0
+
+    def _probe_ended(self, now: float, tail_s: float) -> None:
+        if self._probe_budgeted:
+            # Start to start, a probe's cost is probe_share of the line's time.
+            cost = now - self._probe_started + tail_s
+            self._probe_ready_at = self._probe_started + cost / self.plan.probe_share
+            self._probe_budgeted = False
+
+    def _demote(self, slot: DriveSlot, now: float, report: Report, *, quick: bool) -> None:
+        slot.online = False
+        slot.quick_probe = quick
+        self._quick += quick
+        slot.next_probe_at = now if quick else now + self.plan.probe_interval_s
+        self._demoted.append(slot)
+        report.transitions.append(Transition(slot.plan, online=False))
+
+    def _undemote(self, slot: DriveSlot) -> None:
+        self._demoted.remove(slot)
+        if slot.quick_probe:
+            slot.quick_probe = False
+            self._quick -= 1

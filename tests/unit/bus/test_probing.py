@@ -1,0 +1,162 @@
+"""Absent drives and a silent line, in virtual time: what the wire carries, and when.
+
+Probes of absent drives keep to their share of the line, one at a time, so the drives that
+answer keep their poll rate; a line that falls silent as a whole is asked again at once and
+every drive is back within about one round when it answers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import pytest
+
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.commands.daemon import longest_probe_wait_s
+from tests.unit.bus.bench import (
+    DELAY_S,
+    PARAMETER,
+    PAUSE_S,
+    PROCESS,
+    T0,
+    Bench,
+    bench,
+    exchange_s,
+)
+from tests.unit.bus.fcdrive import FcDrive
+
+POLL_S = exchange_s(PARAMETER, PARAMETER) + PAUSE_S  # one answered poll, pause included
+PRESENT = 16
+
+
+def approx(value: float) -> object:
+    return pytest.approx(value, abs=1e-9)
+
+
+def fleet(configured: int, present: int, probe_interval_s: float = 5.0) -> Bench:
+    drives = [DrivePlan(name=f"d{a}", address=a) for a in range(1, configured + 1)]
+    fc = [FcDrive(a, silent=a > present) for a in range(1, configured + 1)]
+    return bench(*drives, fc=fc, probe_interval_s=probe_interval_s)
+
+
+def probe_cost(b: Bench) -> float:
+    """Line time an unanswered probe takes: its deadline, then the drain for a late reply.
+
+    The scripted drives all answer exactly DELAY_S after the wire time, so once the line
+    has timed its replies the deadline is the wire time, that delay and the smallest margin
+    (the answer time once more).
+    """
+    plan = b.plan
+    deadline = plan.wire_s(2 * PROCESS) + 2 * DELAY_S
+    return deadline + plan.wire_s(PROCESS) + plan.gap_s
+
+
+async def test_absent_drives_are_probed_within_their_share_and_live_ones_keep_their_rate() -> None:
+    b = fleet(126, PRESENT)
+    async with b.master:
+        await b.clock.run_until(T0 + 60.0)  # every absent drive demoted by now
+        assert all(s.online is (s.address <= PRESENT) for s in b.master.planner.slots)
+        start = b.clock.now()
+        await b.clock.run_until(start + 120.0)
+    requests = [(at, t.address) for at, t in b.requests() if at >= start]
+    period = PRESENT * POLL_S  # each live drive's poll period with no absent drive configured
+    cost = probe_cost(b)
+    probes = [(at, a) for at, a in requests if a > PRESENT]
+    # Evenly spread: start to start, each probe is followed by nine times its cost of polls.
+    for (before, _), (after, _) in itertools.pairwise(probes):
+        assert after - before >= cost / 0.1 - 1e-9
+        assert after - before <= cost / 0.1 + POLL_S + 1e-9
+    # Every absent drive is still probed regularly.
+    assert {a for _, a in probes} == set(range(PRESENT + 1, 127))
+    for address in range(PRESENT + 1, 127):
+        times = [at for at, a in probes if a == address]
+        assert all(b2 - b1 <= 110 * (cost / 0.1 + POLL_S) for b1, b2 in itertools.pairwise(times))
+    for address in range(1, PRESENT + 1):
+        times = [at for at, a in requests if a == address]
+        gaps = [after - before for before, after in itertools.pairwise(times)]
+        # Exact spacing: a round of polls, plus a probe's cost for each that came in between
+        # (probes go every ten probe costs, so a round holds one or two of them here).
+        for gap in gaps:
+            probes_between = round((gap - period) / cost)
+            assert gap == approx(period + probes_between * cost)
+            assert probes_between <= math.ceil(period / (cost / 0.1))
+        assert max(gaps) <= 3 * period
+        rate = (len(times) - 1) / (times[-1] - times[0])
+        assert rate >= 0.9 / period
+
+
+async def test_a_silent_line_is_a_line_fault_and_every_drive_is_back_within_a_round() -> None:
+    b = fleet(8, 8, probe_interval_s=5.0)
+    async with b.master:
+        await b.clock.run_until(T0 + 1.0)
+        assert all(s.online for s in b.master.planner.slots)
+        for drive in b.drives.values():
+            drive.silent = True  # the cable is pulled
+        silent_at = b.clock.now()
+        await b.clock.run_until(silent_at + 10.0)
+        planner = b.master.planner
+        assert planner.line_silent
+        assert b.master.stats.to_json(b.clock.now())["line_silent"] is True
+        assert all(s.online is False for s in planner.slots)
+        # Asked one after the other, not at the 5 s probe interval.
+        quiet = [at for at, _ in b.requests() if at > silent_at + 2.0]
+        assert len(quiet) > 50
+        for drive in b.drives.values():
+            drive.silent = False  # plugged back in
+        back_at = b.clock.now()
+        await b.clock.run_until(back_at + 1.0)
+        assert not planner.line_silent
+        assert b.master.stats.to_json(b.clock.now())["line_silent"] is False
+    offline = [(n, at) for n, online, at in b.observer.availability if not online]
+    assert sorted(n for n, _ in offline) == sorted(f"d{a}" for a in range(1, 9))
+    returned = [at for _, online, at in b.observer.availability if online and at > back_at]
+    assert len(returned) == 8
+    # Within about one round: the first answer ends the fault, the rest are asked at once.
+    longest_wait = probe_cost(b)  # the probe under way when the line came back
+    assert max(returned) - back_at <= longest_wait + 8 * (exchange_s(PROCESS, PROCESS) + PAUSE_S)
+
+
+async def test_one_absent_drive_among_answering_ones_is_no_line_fault() -> None:
+    b = fleet(4, 4, probe_interval_s=1.0)
+    async with b.master:
+        await b.clock.run_until(T0 + 0.5)
+        b.drives[3].silent = True
+        await b.clock.run_until(T0 + 5.0)
+        assert not b.master.planner.line_silent
+    assert [(n, online) for n, online, _ in b.observer.availability[4:]] == [("d3", False)]
+    probes = [at for at, t in b.requests(3) if at > T0 + 1.0 and t.pke is None]
+    assert all(after - before >= 1.0 for before, after in itertools.pairwise(probes))
+
+
+def test_the_check_reports_the_longest_wait_for_a_probe_growing_with_the_absent() -> None:
+    drives = tuple(DrivePlan(name=f"d{a}", address=a) for a in range(1, 127))
+    plan = LinePlan(name="line1", port="x", drives=drives, baudrate=115200)
+    # An FC probe is 8 bytes each way; unanswered it costs its deadline and the drain.
+    char_s = 11 / 115200
+    cost = 16 * char_s + 0.010 + 0.050 + 8 * char_s + max(3.5 * char_s, 0.002)
+    assert longest_probe_wait_s(plan) == pytest.approx(125 * cost / 0.1)
+    few = dataclasses.replace(plan, drives=drives[:3])
+    assert longest_probe_wait_s(few) == 5.0  # the probe interval, when few are absent
+
+
+async def test_a_line_silent_after_its_port_came_back_is_a_line_fault_too() -> None:
+    b = fleet(4, 4)
+    async with b.master:
+        await b.clock.run_until(T0 + 0.5)
+        in_flight = await b.mid_transaction()
+        b.transport.lost = True
+        for drive in b.drives.values():
+            drive.silent = True  # the adapter is back, the drives' power is not
+        await b.clock.run_until((in_flight.reply_at or 0.0) + 3.0)
+        assert b.master.is_up
+        assert b.master.planner.line_silent
+        assert all(s.quick_probe for s in b.master.planner.slots)
+        for drive in b.drives.values():
+            drive.silent = False
+        back_at = b.clock.now()
+        await b.clock.run_for(0.5)
+    returned = [at for _, online, at in b.observer.availability if online and at > back_at]
+    assert len(returned) == 4
+    assert max(returned) - back_at <= probe_cost(b) + 4 * (exchange_s(PROCESS, PROCESS) + PAUSE_S)
