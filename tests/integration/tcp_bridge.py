@@ -62,9 +62,12 @@ class _Connection:
 class TcpBridge:
     """Serves ``device`` to one TCP client at a time, on 127.0.0.1 at :attr:`port`."""
 
-    def __init__(self, device: str, *, rfc2217: bool) -> None:
+    def __init__(self, device: str, *, rfc2217: bool, baudrate: int = 19200) -> None:
         self.device = device
         self.rfc2217 = rfc2217
+        # A raw TCP server's serial side is set up on the server itself (its web page) to
+        # the line's rate; an RFC 2217 client sets it remotely, so it starts elsewhere.
+        self.baudrate = baudrate
         self._listener = socket.create_server(("127.0.0.1", 0))
         self._listener.settimeout(0.1)
         self.port: int = self._listener.getsockname()[1]
@@ -115,7 +118,7 @@ class TcpBridge:
             self._serve(client)
 
     def _serve(self, client: socket.socket) -> None:
-        port = _PtyPort(self.device, baudrate=19200, timeout=0.02)
+        port = _PtyPort(self.device, baudrate=self.baudrate, timeout=0.02)
         manager = serial.rfc2217.PortManager(port, _Connection(client)) if self.rfc2217 else None
         done = threading.Event()
         self._spawn(self._to_client, port, client, manager, done)
@@ -166,9 +169,9 @@ class TcpBridge:
 
 
 @contextlib.contextmanager
-def tcp_bridge(device: str, *, rfc2217: bool) -> Iterator[TcpBridge]:
+def tcp_bridge(device: str, *, rfc2217: bool, baudrate: int = 19200) -> Iterator[TcpBridge]:
     """A running :class:`TcpBridge` for ``device``, stopped on exit."""
-    bridge = TcpBridge(device, rfc2217=rfc2217)
+    bridge = TcpBridge(device, rfc2217=rfc2217, baudrate=baudrate)
     bridge.start()
     try:
         yield bridge

@@ -59,7 +59,14 @@ async def line_with_master(
         stack = ExitStack()
         port = server.device
         if over is not None:
-            bridge = stack.enter_context(tcp_bridge(server.device, rfc2217=over == "rfc2217"))
+            bridge = stack.enter_context(
+                tcp_bridge(
+                    server.device,
+                    rfc2217=over == "rfc2217",
+                    # a raw bridge is set to the line's rate; RFC 2217 must set it itself
+                    baudrate=baudrate if over == "socket" else 19200,
+                )
+            )
             if bridges is not None:
                 bridges.append(bridge)
             port = bridge.url
