@@ -99,8 +99,13 @@ class _Prober:
         self.survey = survey
         self.clock = MonotonicClock()
 
-    async def ask(self, address: int, *, listen: bool) -> _Heard:
-        """Poll ``address`` once; with ``listen``, keep listening after a reply for another."""
+    async def ask(self, address: int) -> _Heard:
+        """Poll ``address`` once, listening until the reply deadline.
+
+        Listening on after a reply costs only where a drive answers, and hears a second
+        drive at the address that answers later than the first (a longer response delay);
+        it also keeps that drive's reply from arriving in the next poll's window.
+        """
         plan, codec, transport, clock = self.plan, self.codec, self.transport, self.clock
         exchange = codec.poll(address, None, None)
         request = exchange.request
@@ -135,13 +140,8 @@ class _Prober:
                     if heard.replies == 1:
                         wire = plan.wire_s(len(piece.data))
                         heard.turnaround_s = max(0.0, arrived - sent_end - wire)
-                        # Wait a reply's length (and a gap) more: a second drive may follow.
-                        more = plan.wire_s(exchange.reply_length) + 2 * plan.gap_s + 0.005
-                        deadline = arrived + more if listen else arrived
                 else:
                     heard.stray += len(piece.data)
-            if heard.replies and not listen:
-                break
         framer.reset()
         while (piece := framer.next_frame()) is not None:
             heard.stray += len(piece.data)
@@ -163,7 +163,7 @@ class _Prober:
         self._count(report, first)
         if first.replies or first.stray >= self._reply_length(report.address):
             for _ in range(CONFIRM_ATTEMPTS - 1):
-                self._count(report, await self.ask(report.address, listen=True))
+                self._count(report, await self.ask(report.address))
 
     def _count(self, report: AddressReport, heard: _Heard) -> None:
         report.attempts += 1
@@ -280,7 +280,7 @@ def _probe_list(
 async def _anyone(prober: _Prober, addresses: list[int]) -> bool:
     """Whether a drive answers (or two collide) at one of ``addresses``."""
     for address in addresses:
-        heard = await prober.ask(address, listen=False)
+        heard = await prober.ask(address)
         if heard.replies or heard.stray >= prober._reply_length(address):
             return True
         prober.survey.noise_bytes += heard.stray
@@ -297,7 +297,7 @@ async def _scan(
     for done, address in enumerate(wanted, 1):
         note(f"scanning address {address} ({done}/{len(wanted)}), found {len(survey.drives)}")
         report = AddressReport(address=address)
-        await prober.confirm(report, await prober.ask(address, listen=True))
+        await prober.confirm(report, await prober.ask(address))
         if report.attempts > 1 or report.answered or report.garbled:
             survey.addresses.append(report)
 

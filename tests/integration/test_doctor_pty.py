@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -169,3 +170,40 @@ async def test_bad_input_exits_2() -> None:
         assert "runs backwards" in err
         code, _, err = await doctor(server, "--config", "/nonexistent/plant.yaml")
         assert code == 2
+
+
+async def test_two_drives_on_one_address_that_answer_one_after_the_other() -> None:
+    # Different response delays (8-35): the replies do not overlap, both check, one is extra.
+    line = LineSettings(protocol="danfoss-fc", baudrate=19200, duplicate_addresses=True)
+    drives = [(1, DriveSettings()), (1, DriveSettings(response_delay_s=0.025))]
+    async with commissioning.served(line, drives) as server:
+        code, report = await doctor_json(server, "--protocol", "danfoss-fc", "--addresses", "1-3")
+        assert server.line.counters.collisions == 0
+    assert code == 1
+    duplicate = finding(report, "duplicate_address")
+    assert duplicate["address"] == 1
+    assert "doubled replies in 3 of 3 attempts" in duplicate["message"]
+    assert [f["code"] for f in report["findings"]] == ["duplicate_address"]  # not noise
+
+
+async def test_progress_is_shown_on_a_terminal_and_cleared() -> None:
+    terminal, stderr = os.openpty()  # the doctor's stderr is a terminal, as a technician's is
+    try:
+        async with commissioning.served(FC_19200, TWO) as server:
+            process = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "fcmaster", "doctor", "--port", server.device,
+                "--protocol", "danfoss-fc", "--addresses", "1-3",
+                stdout=asyncio.subprocess.PIPE, stderr=stderr,
+            )  # fmt: skip
+            out, _ = await process.communicate()
+        os.set_blocking(terminal, False)
+        shown = os.read(terminal, 1 << 16).decode()
+    finally:
+        os.close(terminal)
+        os.close(stderr)
+    assert process.returncode == 0, out
+    assert "setting 1/24: danfoss-fc 115200 8E1" in shown
+    assert "setting 13/24: danfoss-fc 19200 8E1" in shown
+    assert "scanning address 3 (3/3), found 2" in shown
+    assert shown.endswith("\r\x1b[K")  # the last progress line is wiped before the report
+    assert "\x1b[K" not in out.decode()  # the report itself is plain
