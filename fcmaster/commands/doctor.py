@@ -33,7 +33,7 @@ from fcmaster.bus.codecs import PROTOCOLS, codec_for, with_protocol_delay
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.bus.transport import Transport
-from fcmaster.clock import MonotonicClock
+from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.commands.commission import FACTORY
 from fcmaster.commands.diagnosis import (
     AddressReport,
@@ -92,12 +92,12 @@ class _Heard:
 class _Prober:
     """Polls addresses at one line setting over an open transport."""
 
-    def __init__(self, plan: LinePlan, transport: Transport, survey: Survey) -> None:
+    def __init__(self, plan: LinePlan, transport: Transport, survey: Survey, clock: Clock) -> None:
         self.plan = plan
         self.codec: DriveCodec = codec_for(plan)
         self.transport = transport
         self.survey = survey
-        self.clock = MonotonicClock()
+        self.clock = clock
 
     async def ask(self, address: int) -> _Heard:
         """Poll ``address`` once, listening until the reply deadline.
@@ -161,7 +161,7 @@ class _Prober:
     async def confirm(self, report: AddressReport, first: _Heard) -> None:
         """Count ``first`` and, where anything came back, listen to more attempts."""
         self._count(report, first)
-        if first.replies or first.stray >= self._reply_length(report.address):
+        if first.replies or first.stray >= self.reply_length(report.address):
             for _ in range(CONFIRM_ATTEMPTS - 1):
                 self._count(report, await self.ask(report.address))
 
@@ -174,12 +174,12 @@ class _Prober:
         elif heard.replies == 1:
             report.answered += 1
             self.survey.noise_bytes += heard.stray
-        elif heard.stray >= self._reply_length(report.address):
+        elif heard.stray >= self.reply_length(report.address):
             report.garbled += 1  # a reply's worth that never checked: two drives at once
         else:
             self.survey.noise_bytes += heard.stray
 
-    def _reply_length(self, address: int) -> int:
+    def reply_length(self, address: int) -> int:
         return self.codec.poll(address, None, None).reply_length
 
 
@@ -224,9 +224,15 @@ async def examine(
     timeout_s: float | None = None,
     open_transport: OpenTransport = _serial,
     progress: Progress | None = None,
+    clock: Clock | None = None,
 ) -> Survey:
-    """Find the setting where drives answer, then scan and confirm the drives there."""
+    """Find the setting where drives answer, then scan and confirm the drives there.
+
+    ``clock`` must be the transport's timebase (a serial port's is the monotonic clock).
+    """
     survey = Survey(port=port, expected=expected)
+    clock = clock or MonotonicClock()
+    _check_addresses(addresses, protocols)
     note = progress or (lambda text: None)
     candidates = list(settings_to_try(protocols))
     opened = False
@@ -244,18 +250,18 @@ async def examine(
         opened = True
         try:
             survey.adapter = survey.adapter or getattr(transport, "adapter", None)
-            prober = _Prober(plan, transport, survey)
+            prober = _Prober(plan, transport, survey, clock)
             asked = _probe_list(prober.codec, probe, addresses)
             if await _anyone(prober, asked):
                 survey.found = fmt
             elif fmt.protocol == "danfoss-fc":  # drives that know only the 31 format?
                 plan31 = _plan(port, _format31(fmt), timeout_s)
-                prober31 = _Prober(plan31, transport, survey)
-                asked31 = [a for a in asked if a in prober31.codec.addresses][:2]
+                prober31 = _Prober(plan31, transport, survey, clock)
+                asked31 = [a for a in asked if a in prober31.codec.addresses][:1]
                 if await _anyone(prober31, asked31):
                     survey.found, survey.only_format_31 = _format31(fmt), True
             if survey.found is not None:
-                await _scan(_Prober(_plan(port, survey.found, timeout_s), transport, survey),
+                await _scan(_Prober(_plan(port, survey.found, timeout_s), transport, survey, clock),
                             addresses, survey, note)  # fmt: skip
                 return survey
         finally:
@@ -281,19 +287,19 @@ async def _anyone(prober: _Prober, addresses: list[int]) -> bool:
     """Whether a drive answers (or two collide) at one of ``addresses``."""
     for address in addresses:
         heard = await prober.ask(address)
-        if heard.replies or heard.stray >= prober._reply_length(address):
-            return True
+        if heard.stray >= prober.reply_length(address) and not heard.replies:
+            return True  # a reply's worth that never checks: two drives at once, likely
         prober.survey.noise_bytes += heard.stray
+        if heard.replies:
+            return True
     return False
 
 
 async def _scan(
     prober: _Prober, addresses: list[int] | None, survey: Survey, note: Progress
 ) -> None:
-    wanted = addresses or list(prober.codec.addresses)
-    for address in wanted:
-        if address not in prober.codec.addresses:
-            raise UsageError(f"address {address} is outside {_span(prober.codec.addresses)}")
+    reach = prober.codec.addresses
+    wanted = [a for a in addresses if a in reach] if addresses else list(reach)
     for done, address in enumerate(wanted, 1):
         note(f"scanning address {address} ({done}/{len(wanted)}), found {len(survey.drives)}")
         report = AddressReport(address=address)
@@ -302,8 +308,14 @@ async def _scan(
             survey.addresses.append(report)
 
 
-def _span(addresses: range) -> str:
-    return f"{addresses.start}-{addresses.stop - 1}"
+def _check_addresses(addresses: list[int] | None, protocols: tuple[str, ...]) -> None:
+    """UsageError for an address no protocol tried can reach (each scan keeps its own)."""
+    reach = {p: codec_for(LinePlan(name="doctor", port="", protocol=p)).addresses
+             for p in protocols}  # fmt: skip
+    for address in addresses or ():
+        if not any(address in span for span in reach.values()):
+            spans = ", ".join(f"{p} {r.start}-{r.stop - 1}" for p, r in reach.items())
+            raise UsageError(f"address {address} is outside every protocol's range ({spans})")
 
 
 def expected_from_config(config: Path, port: str) -> Expected:
