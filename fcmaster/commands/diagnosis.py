@@ -124,6 +124,7 @@ class Survey:
     adapter: Adapter | None = None
     expected: Expected | None = None
     only_format_31: bool = False  # FC drives answered in the 31 format and not in 126
+    settings_probed: bool = True  # False: a socket:// converter, whose own settings apply
 
     @property
     def drives(self) -> list[int]:
@@ -168,17 +169,20 @@ def diagnose(survey: Survey) -> list[Finding]:
 
 
 def _no_answer(survey: Survey) -> Finding:
+    converter = "" if survey.settings_probed else "set the converter's serial side to the drives'; "
     return Finding(
         "no_answer",
         f"no drive answered on {survey.port} at any of {survey.settings_tried} line settings",
-        "check that the drives are powered and set to the protocol; swap the A and B wires "
-        "if they may be crossed; terminate both ends of the line with 120 ohm; if the drives "
-        "are at other addresses than those probed, pass --addresses",
+        f"{converter}check that the drives are powered and set to the protocol; swap the A "
+        "and B wires if they may be crossed; terminate both ends of the line with 120 ohm; "
+        "if the drives are at other addresses than those probed, pass --addresses",
     )
 
 
 def _settings(survey: Survey, found: LineFormat) -> list[Finding]:
     expected = survey.expected
+    if not survey.settings_probed:
+        return []  # the converter's settings, not the port's: nothing was compared
     findings: list[Finding] = []
     if expected is not None:
         want = expected.line
@@ -297,8 +301,8 @@ def _latency(survey: Survey) -> list[Finding]:
 
 def _slow(survey: Survey) -> list[Finding]:
     turnaround_ms, found = survey.turnaround_ms, survey.found
-    if turnaround_ms is None or found is None:
-        return []
+    if turnaround_ms is None or found is None or "://" in survey.port:
+        return []  # over a network the round trip is in it too: no measure of the line
     factory_ms = DRIVE_DELAY_S[found.protocol] * 1000.0
     if turnaround_ms - factory_ms < SLOW_BY_S * 1000.0:
         return []
@@ -327,6 +331,7 @@ def to_json(survey: Survey, findings: list[Finding]) -> dict[str, Any]:
         "drives": survey.drives,
         "addresses": [r.to_json() for r in survey.addresses if r.present],
         "settings_tried": survey.settings_tried,
+        "settings_probed": survey.settings_probed,
         "requests": survey.requests,
         "echoes": survey.echoes,
         "noise_bytes": survey.noise_bytes,
@@ -344,7 +349,9 @@ def to_text(survey: Survey, findings: list[Finding]) -> list[str]:
         adapter = survey.adapter
         latency = "no latency timer" if adapter.latency_ms is None else f"{adapter.latency_ms} ms"
         lines.append(f"adapter   {adapter.driver or 'unknown driver'}, latency timer {latency}")
-    if survey.found is not None:
+    if survey.found is not None and not survey.settings_probed:
+        lines.append(f"line      {survey.found.protocol} (the converter's own serial settings)")
+    elif survey.found is not None:
         lines.append(f"line      {survey.found.text()}")
         drives = ", ".join(str(a) for a in survey.drives) or "none"
         lines.append(f"drives    {drives}")

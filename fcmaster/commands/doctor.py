@@ -203,11 +203,24 @@ def _plan(port: str, fmt: LineFormat, timeout_s: float | None) -> LinePlan:
     return plan
 
 
-def settings_to_try(protocols: tuple[str, ...]) -> Iterator[LineFormat]:
-    """Each protocol's settings: baud rates fastest first, the factory parity first."""
+def settings_to_try(
+    protocols: tuple[str, ...], *, fixed: Expected | None = None, probe_format: bool = True
+) -> Iterator[LineFormat]:
+    """Each protocol's settings: baud rates fastest first, the factory parity first.
+
+    Without ``probe_format`` (a ``socket://`` converter, whose serial side is set on the
+    converter) each protocol is tried once, at the config's settings or its factory ones.
+    """
     for protocol in protocols:
-        stopbits = FACTORY[protocol][2]
+        baudrate, parity, stopbits = FACTORY[protocol]
         address_format = 126 if protocol == "danfoss-fc" else None
+        if not probe_format:
+            if fixed is not None and fixed.line.protocol == protocol:
+                yield fixed.line
+            else:
+                yield LineFormat(protocol=protocol, baudrate=baudrate, parity=parity,
+                                 stopbits=stopbits, address_format=address_format)  # fmt: skip
+            continue
         for baudrate in BAUDRATES[protocol]:
             for parity in PARITIES[protocol]:
                 yield LineFormat(protocol=protocol, baudrate=baudrate, parity=parity,
@@ -234,7 +247,12 @@ async def examine(
     clock = clock or MonotonicClock()
     _check_addresses(addresses, protocols)
     note = progress or (lambda text: None)
-    candidates = list(settings_to_try(protocols))
+    # A raw TCP converter (socket://) has its serial settings on the converter: the port
+    # takes none, so every rate would seem to work. rfc2217:// does carry them.
+    survey.settings_probed = not port.startswith("socket://")
+    candidates = list(
+        settings_to_try(protocols, fixed=expected, probe_format=survey.settings_probed)
+    )
     opened = False
     first_error: PortError | None = None
     for number, fmt in enumerate(candidates, 1):

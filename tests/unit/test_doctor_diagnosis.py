@@ -174,6 +174,9 @@ def test_replies_held_beyond_the_drives_delay_are_slow() -> None:
     assert "latency timer" in finding.fix
     assert "8-35" in finding.fix
     assert diagnose(healthy(turnarounds_s=[0.0105, 0.012, 0.030])) == []  # 12 ms: in margin
+    # Through a TCP converter the network's round trip is in every turnaround.
+    remote = healthy(port="socket://10.0.0.7:4001", turnarounds_s=[0.030] * 3)
+    assert diagnose(remote) == []
 
 
 def test_the_json_report_carries_every_finding() -> None:

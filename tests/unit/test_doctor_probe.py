@@ -9,7 +9,7 @@ import pytest
 
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.transport import Transport
-from fcmaster.commands.diagnosis import Survey
+from fcmaster.commands.diagnosis import Survey, diagnose, to_text
 from fcmaster.commands.doctor import examine
 from fcmaster.errors import PortError, UsageError
 from fcmaster.protocol.danfoss_fc import AddressFormat, Telegram, encode_telegram
@@ -171,3 +171,24 @@ async def test_rates_the_port_refuses_are_skipped_and_a_port_that_never_opens_fa
 async def test_an_address_no_protocol_reaches_is_refused_before_the_port_opens() -> None:
     with pytest.raises(UsageError, match="address 200 is outside every protocol's range"):
         await doctor(at(9600, "E", drives_at(1)), addresses=[1, 200])
+
+
+async def test_a_socket_converter_is_tried_once_per_protocol_at_its_own_settings() -> None:
+    # The converter's serial side is set on the converter: the port takes no baud rate, so
+    # drives that answer "at every rate" must not be reported at the first one tried.
+    clock = VirtualClock()
+    opened: list[tuple[int, str]] = []
+
+    def open_transport(plan: LinePlan) -> Transport:
+        opened.append((plan.baudrate, plan.parity))
+        return ScriptedTransport(clock, drives_at(1), char_s=plan.char_s)
+
+    survey = await clock.complete(
+        examine("socket://10.0.0.7:4001", protocols=("danfoss-fc",), addresses=[1, 2],
+                open_transport=open_transport, clock=clock),
+    )  # fmt: skip
+    assert opened == [(9600, "E")]  # the factory settings, once
+    assert not survey.settings_probed
+    assert survey.drives == [1]
+    assert diagnose(survey) == []
+    assert "line      danfoss-fc (the converter's own serial settings)" in to_text(survey, [])
