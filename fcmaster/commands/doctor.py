@@ -98,6 +98,8 @@ class _Prober:
         self.transport = transport
         self.survey = survey
         self.clock = clock
+        self._pause_s = self.codec.min_pause_s(plan.char_s)
+        self.quiet_at = 0.0  # the protocol's pause after the last bytes heard ends here
 
     async def ask(self, address: int) -> _Heard:
         """Poll ``address`` once, listening until the reply deadline.
@@ -109,6 +111,8 @@ class _Prober:
         plan, codec, transport, clock = self.plan, self.codec, self.transport, self.clock
         exchange = codec.poll(address, None, None)
         request = exchange.request
+        if self.quiet_at > clock.now():
+            await clock.sleep_until(self.quiet_at)
         stale = transport.discard_input()  # bytes between requests: noise (or a late twin)
         self.survey.noise_bytes += len(stale)
         written = clock.now()
@@ -126,6 +130,7 @@ class _Prober:
             except ReplyTimeout:
                 break
             arrived = transport.received_at
+            self.quiet_at = arrived + self._pause_s
             if echo_open:
                 pending += chunk
                 if request.startswith(pending) and len(pending) < len(request):
@@ -180,6 +185,7 @@ class _Prober:
             self.survey.noise_bytes += heard.stray
 
     def reply_length(self, address: int) -> int:
+        """How long a status reply from ``address`` is: less than that is no collision."""
         return self.codec.poll(address, None, None).reply_length
 
 
@@ -273,14 +279,14 @@ async def examine(
             if await _anyone(prober, asked):
                 survey.found = fmt
             elif fmt.protocol == "danfoss-fc":  # drives that know only the 31 format?
-                plan31 = _plan(port, _format31(fmt), timeout_s)
-                prober31 = _Prober(plan31, transport, survey, clock)
-                asked31 = [a for a in asked if a in prober31.codec.addresses][:1]
-                if await _anyone(prober31, asked31):
-                    survey.found, survey.only_format_31 = _format31(fmt), True
+                fmt31, heard_until = _format31(fmt), prober.quiet_at
+                prober = _Prober(_plan(port, fmt31, timeout_s), transport, survey, clock)
+                prober.quiet_at = heard_until  # the same line: the pause still holds
+                asked31 = [a for a in asked if a in prober.codec.addresses][:1]
+                if await _anyone(prober, asked31):
+                    survey.found, survey.only_format_31 = fmt31, True
             if survey.found is not None:
-                await _scan(_Prober(_plan(port, survey.found, timeout_s), transport, survey, clock),
-                            addresses, survey, note)  # fmt: skip
+                await _scan(prober, addresses, survey, note)  # the prober that heard them
                 return survey
         finally:
             await transport.close()

@@ -3,6 +3,7 @@ a reply, a collision or noise, and the order it tries settings in."""
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import pytest
@@ -45,6 +46,7 @@ async def doctor(
     *,
     addresses: list[int] | None = None,
     fail_at: frozenset[int] = frozenset(),
+    transports: list[ScriptedTransport] | None = None,
 ) -> tuple[Survey, list[tuple[int, str]]]:
     clock = VirtualClock()
     opened: list[tuple[int, str]] = []
@@ -53,6 +55,8 @@ async def doctor(
         opened.append((plan.baudrate, plan.parity))
         transport = ScriptedTransport(clock, responder_for(plan), char_s=plan.char_s)
         transport.fail_open = plan.baudrate in fail_at
+        if transports is not None:
+            transports.append(transport)
         return transport
 
     survey = await clock.complete(
@@ -192,3 +196,19 @@ async def test_a_socket_converter_is_tried_once_per_protocol_at_its_own_settings
     assert survey.drives == [1]
     assert diagnose(survey) == []
     assert "line      danfoss-fc (the converter's own serial settings)" in to_text(survey, [])
+
+
+async def test_a_reply_at_the_end_of_its_window_still_gets_the_protocols_pause() -> None:
+    char_s = 11 / 115200
+    window = 16 * char_s + 0.010 + 0.030  # request and reply on the wire, 8-35, the margin
+    late = window - 0.0001  # the last moment a reply is still taken
+    lines: list[ScriptedTransport] = []
+    survey, _ = await doctor(
+        at(115200, "E", lambda r: Timed(((late, reply(adr(r))),))), transports=lines
+    )
+    assert survey.drives == [1, 2, 3]
+    sent = lines[0].sent
+    assert len(sent) == 1 + 3 * 3  # the probe, then three attempts at each address
+    for previous, following in itertools.pairwise(sent):
+        assert previous.reply_at is not None
+        assert following.at - previous.reply_at >= 2 * char_s - 1e-9  # FC: two characters
