@@ -116,6 +116,7 @@ class Survey:
     found: LineFormat | None = None  # where drives answered; None: nowhere
     settings_tried: int = 0
     addresses: list[AddressReport] = field(default_factory=list)  # at ``found``
+    scanned: list[int] = field(default_factory=list)  # every address asked at ``found``
     requests: int = 0  # every request written, at every setting
     echoes: int = 0  # of those, how many came back byte for byte before anything else
     noise_bytes: int = 0  # bytes outside frames (collision garbage not counted)
@@ -196,9 +197,8 @@ def _settings(survey: Survey, found: LineFormat) -> list[Finding]:
             findings.append(
                 Finding(
                     "settings",
-                    f"drives answer at {found.character_format} ({found.protocol}) but the config "
-                    f"(bus {expected.bus}) "
-                    f"says {said}",
+                    f"drives answer at {found.character_format} ({found.protocol}) "
+                    f"but the config (bus {expected.bus}) says {said}",
                     f"set {sets} on bus {expected.bus}",
                     {"found": found.to_json(), "config": want.to_json()},
                 )
@@ -223,9 +223,9 @@ def _duplicates(survey: Survey, found: LineFormat) -> list[Finding]:
         if not report.collides:
             continue
         how = "doubled replies" if report.doubled else "garbled replies"
-        free = next((a for a in range(1, 32) if a not in taken), None)  # in every protocol's range
-        suggestion = f" (e.g. {free}, which nothing answers)" if free is not None else ""
-        taken.add(free or 0)
+        free = next((a for a in survey.scanned if a not in taken), None)
+        suggestion = f" (e.g. {free}, where nothing answered)" if free is not None else ""
+        taken.add(free if free is not None else -1)
         findings.append(
             Finding(
                 "duplicate_address",

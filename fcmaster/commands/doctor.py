@@ -324,6 +324,7 @@ async def _scan(
 ) -> None:
     reach = prober.codec.addresses
     wanted = [a for a in addresses if a in reach] if addresses else list(reach)
+    survey.scanned = wanted
     for done, address in enumerate(wanted, 1):
         note(f"scanning address {address} ({done}/{len(wanted)}), found {len(survey.drives)}")
         report = AddressReport(address=address)

@@ -27,7 +27,7 @@ def healthy(**changes: object) -> Survey:
     """Two drives answering cleanly at FC 19200 8E1, replies 10.4 ms after each request."""
     survey = Survey(
         port="/dev/ttyUSB0", found=FC_19200, settings_tried=13, addresses=answering(1, 2),
-        requests=60, listened_s=3.0, turnarounds_s=[0.0104] * 6,
+        requests=60, listened_s=3.0, turnarounds_s=[0.0104] * 6, scanned=list(range(1, 7)),
     )  # fmt: skip
     for key, value in changes.items():
         setattr(survey, key, value)
@@ -123,12 +123,15 @@ def test_two_drives_at_one_address_name_the_address_parameter_and_a_free_address
     assert finding.code == "duplicate_address"
     assert finding.message == "two drives answer at address 2 (garbled replies in 3 of 3 attempts)"
     assert (
-        finding.fix == "give one of them another address with 8-31 (e.g. 4, which nothing answers)"
+        finding.fix == "give one of them another address with 8-31 (e.g. 4, where nothing answered)"
     )
     assert finding.to_json()["address"] == 2
     found = LineFormat(protocol="mitsubishi", baudrate=19200, parity="E", stopbits=2)
     [finding] = diagnose(healthy(found=found, addresses=[twins], turnarounds_s=[]))
     assert "Pr.117" in finding.fix
+    # Where every address scanned is taken, no free one is suggested (others were not asked).
+    [finding] = diagnose(healthy(addresses=[twins, *answering(3)], scanned=[2, 3]))
+    assert finding.fix == "give one of them another address with 8-31"
 
 
 def test_collisions_are_judged_over_attempts() -> None:
