@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 import pytest
 
+from fcmaster.bus.adapter import Adapter
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.transport import Transport
 from fcmaster.commands.diagnosis import Survey, diagnose, to_text
@@ -212,3 +213,23 @@ async def test_a_reply_at_the_end_of_its_window_still_gets_the_protocols_pause()
     for previous, following in itertools.pairwise(sent):
         assert previous.reply_at is not None
         assert following.at - previous.reply_at >= 2 * char_s - 1e-9  # FC: two characters
+
+
+async def test_the_adapter_the_port_opened_on_is_kept_for_the_diagnosis() -> None:
+    # SerialTransport describes the USB adapter behind a local port once it is open (its
+    # latency timer read back after asking for 1 ms); the doctor reports what it found.
+    clock = VirtualClock()
+    ftdi = Adapter(device="/dev/ttyUSB0", driver="ftdi_sio", by_id=None, by_path=None,
+                   latency_ms=16)  # fmt: skip
+
+    def open_transport(plan: LinePlan) -> Transport:
+        transport = ScriptedTransport(clock, at(19200, "E", drives_at(1))(plan), char_s=plan.char_s)
+        transport.adapter = ftdi  # type: ignore[attr-defined]
+        return transport
+
+    survey = await clock.complete(
+        examine("/dev/ttyUSB0", protocols=("danfoss-fc",), addresses=[1],
+                open_transport=open_transport, clock=clock),
+    )  # fmt: skip
+    assert survey.adapter is ftdi
+    assert [f.code for f in diagnose(survey)] == ["adapter_latency"]
