@@ -208,6 +208,26 @@ def build_parser() -> argparse.ArgumentParser:
     ports.add_argument("--config", type=Path, help="also say which bus uses each adapter")
     ports.add_argument("--json", action="store_true", help="print JSON")
 
+    doctor = commands.add_parser(
+        "doctor",
+        help="find a line's settings and drives, and what to fix",
+        description="Find the line's protocol, baud rate, parity and (FC) address format, the "
+        "drives on it, an echoing adapter, two drives on one address, noise and the adapter's "
+        "latency; say what to fix. Exit 0: drives answer and nothing needs fixing; 1: a "
+        "finding needs fixing, no drive answers, or the port cannot be opened; 2: bad input.",
+    )
+    doctor.add_argument("--port", required=True, help="/dev/ttyUSB0, COM3, socket://host:port")
+    doctor.add_argument("--protocol", choices=PROTOCOLS, help="default: try each")
+    doctor.add_argument(
+        "--config", type=Path, help="compare with the bus at this port in this config"
+    )
+    doctor.add_argument(
+        "--addresses", type=_addresses,
+        help="where to look (default: every address; the first few are probed per setting)",
+    )  # fmt: skip
+    doctor.add_argument("--timeout", type=_seconds, help="reply deadline in seconds")
+    doctor.add_argument("--json", action="store_true", help="print JSON")
+
     monitor = commands.add_parser("monitor", help="a running daemon's fleet as a live table")
     monitor.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
     monitor.add_argument("--token", help="a viewer token (default: $FCM_TOKEN)")
@@ -350,6 +370,17 @@ def _cmd_ports(args: argparse.Namespace) -> int:
     return ports.run(args.config, as_json=args.json)
 
 
+def _cmd_doctor(args: argparse.Namespace) -> int:
+    from fcmaster.commands import doctor
+
+    return _run_async(
+        doctor.run(
+            args.port, protocol=args.protocol, config=args.config, addresses=args.addresses,
+            timeout_s=args.timeout, as_json=args.json,
+        )
+    )  # fmt: skip
+
+
 def _cmd_monitor(args: argparse.Namespace) -> int:
     from fcmaster.commands import monitor
 
@@ -369,6 +400,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "sim": _cmd_sim,
     "monitor": _cmd_monitor,
     "ports": _cmd_ports,
+    "doctor": _cmd_doctor,
 }
 
 

@@ -39,6 +39,7 @@ import contextlib
 import fcntl
 import os
 import struct
+import sys
 import termios
 import tty
 from types import TracebackType
@@ -60,6 +61,24 @@ _BAUD_OF_SPEED: Final = {
     for name in dir(termios)
     if name[:1] == "B" and name[1:].isdigit() and int(name[1:]) > 0
 }
+# A rate termios has no constant for (76800) is set as BOTHER with the number in termios2,
+# which TCGETS2 reads: struct termios2 is 4 flag words, c_line, 19 c_cc, c_ispeed, c_ospeed.
+_BOTHER: Final = getattr(termios, "BOTHER", 0o010000)
+_TCGETS2: Final = 0x802C542A  # _IOR('T', 0x2A, struct termios2) on asm-generic ioctls
+_TERMIOS2_SIZE, _TERMIOS2_OSPEED = 44, 40
+
+
+def _baud_of(fd: int, speed: int) -> int | None:
+    """The baud rate a client set on the pty ``fd`` (termios speed ``speed``), if known."""
+    if speed != _BOTHER:
+        return _BAUD_OF_SPEED.get(speed)
+    buffer = bytearray(_TERMIOS2_SIZE)
+    try:
+        fcntl.ioctl(fd, _TCGETS2, buffer, True)
+    except OSError:
+        return None  # another ABI: an unknown speed tells nothing
+    baud = int.from_bytes(buffer[_TERMIOS2_OSPEED : _TERMIOS2_OSPEED + 4], sys.byteorder)
+    return baud or None
 
 
 class PtyServer:
@@ -166,7 +185,7 @@ class PtyServer:
         try:
             attrs = termios.tcgetattr(self._slave)
             if attrs not in self._baselines:  # not our own change
-                self.line.hear_master_at(_BAUD_OF_SPEED.get(attrs[_OSPEED]))
+                self.line.hear_master_at(_baud_of(self._slave, attrs[_OSPEED]))
                 self._baseline ^= 1
                 termios.tcsetattr(self._slave, termios.TCSANOW, self._baselines[self._baseline])
         except termios.error:

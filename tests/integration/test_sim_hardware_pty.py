@@ -56,3 +56,16 @@ async def test_fcmaster_sim_serves_an_adapter_latency_and_twins(tmp_path: Path) 
     )
     assert name == "line1"
     assert found == [1]  # 2's two drives garble each other
+
+
+async def test_a_rate_termios_has_no_constant_for_is_heard_at_its_own_speed() -> None:
+    # 76800 (FC 8-32 offers it) is set as BOTHER with the number beside it: the server reads
+    # the number, so a master at 76800 is misframed on a 19200 line and heard on a 76800 one.
+    async with commissioning.served(FC_19200, [(2, DriveSettings())]) as server:
+        code, found, _ = await scan(server, "--baudrate", "76800")
+        assert (code, found) == (1, [])
+        assert server.line.counters.misframed_bytes > 0
+    line = LineSettings(protocol="danfoss-fc", baudrate=76800, parity="E")
+    async with commissioning.served(line, [(2, DriveSettings())]) as server:
+        code, found, err = await scan(server, "--baudrate", "76800")
+        assert (code, found) == (0, [2]), err
