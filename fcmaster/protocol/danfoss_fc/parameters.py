@@ -258,3 +258,24 @@ def lookup(pnu: int) -> ParameterSpec:
     if spec is None:
         return ParameterSpec(pnu=pnu, name="", data_type=None)
     return spec
+
+
+# -- parameter sets (fcmaster.protocol.parameter_set) ------------------------------------
+
+# A set is every writable parameter of the table, in table order.
+SET_MEMBERS: Final = tuple((s.number, s.name) for s in PARAMETERS.values() if s.writable)
+IDENTITY: Final = tuple(
+    (number, PARAMETERS[parse_parameter(number)].name)
+    for number in ("15-40", "15-41", "15-42", "15-43", "15-51")
+)
+IDENTITY_MATCH: Final = frozenset({"15-40"})  # FC type: a set fits drives of its own type
+# The programming guides mark each parameter "change during operation" TRUE or FALSE; a
+# drive answers error 17 to a FALSE one while running. Of the table's members, only the
+# ramp times and the control-word timeout are taken as changeable while the motor turns:
+# they change no speed or limit by themselves. The others (references, speed limits, jog
+# speed, response delays) are written only while stopped, whatever the drive would allow.
+CHANGEABLE_WHILE_RUNNING: Final = frozenset(
+    {"3-41", "3-42", "3-51", "3-52", "3-81", "8-03", "8-04"}
+)
+# Protocol, address, baud rate, parity: a restore that changed them would lose the drive.
+LINK_SETTINGS: Final = frozenset({"8-30", "8-31", "8-32", "8-33"})
