@@ -193,7 +193,6 @@ async def restore(
         )
     async with _Session(options.plan()) as session:
         drive = _Drive(session, address)
-        running = await drive.running()
         current = await _read_drive(drive, profile)
         mismatches = identity_mismatches(profile, saved, current)
         if mismatches and not force:
@@ -204,13 +203,18 @@ async def restore(
             )
         wanted = [d for d in compare(saved, current) if _restorable(d)]
         report = _Report()
+        tty = sys.stderr.isatty()
         for done, change in enumerate(wanted, 1):
-            await _restore_one(
-                drive, profile, change, running=running, persist=persist, report=report
-            )
-            if sys.stderr.isatty():
+            await _restore_one(drive, profile, change, persist=persist, report=report)
+            if tty:
                 _progress(done, len(wanted), change.parameter)
-        if wanted and sys.stderr.isatty():
+        # A value the drive refused may have been bounded by another not yet written (FC:
+        # 4-12 Motor Speed Low Limit ≤ 4-14 High Limit): once the others are in, try again.
+        again = [d for d in wanted if d.parameter in report.refused_by_drive]
+        if again and report.written:
+            for change in again:
+                await _restore_one(drive, profile, change, persist=persist, report=report)
+        if wanted and tty:
             sys.stderr.write("\n")
     for line in report.lines:
         print(line)
@@ -235,21 +239,34 @@ def _why_not(d: Difference) -> str:
 
 
 class _Report:
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-        self.written = self.failed = 0
+    """Each difference's last outcome, in the order first tried."""
 
-    def add(self, d: Difference, ok: bool, text: str) -> None:
-        if ok:
-            self.written += 1
+    def __init__(self) -> None:
+        self.outcomes: dict[str, tuple[bool, str]] = {}
+        self.refused_by_drive: set[str] = set()
+
+    def add(self, d: Difference, ok: bool, text: str, *, drive_refused: bool = False) -> None:
+        self.outcomes[d.parameter] = (ok, f"{d.parameter:<8} {d.name}: {text}")
+        if drive_refused:
+            self.refused_by_drive.add(d.parameter)
         else:
-            self.failed += 1
-        self.lines.append(f"{d.parameter:<8} {d.name}: {text}")
+            self.refused_by_drive.discard(d.parameter)
+
+    @property
+    def lines(self) -> list[str]:
+        return [line for _, line in self.outcomes.values()]
+
+    @property
+    def written(self) -> int:
+        return sum(ok for ok, _ in self.outcomes.values())
+
+    @property
+    def failed(self) -> int:
+        return len(self.outcomes) - self.written
 
 
 async def _restore_one(
-    drive: _Drive, profile: SetProfile, d: Difference, *, running: bool, persist: bool,
-    report: _Report,
+    drive: _Drive, profile: SetProfile, d: Difference, *, persist: bool, report: _Report,
 ) -> None:  # fmt: skip
     assert d.left is not None
     assert isinstance(d.left.value, float)
@@ -258,14 +275,15 @@ async def _restore_one(
         report.add(d, False, f"{change} not written: it sets how the drive talks on the line; "
                    "change it with fcmaster write, then the line options")  # fmt: skip
         return
-    if running and d.parameter not in profile.changeable_while_running:
+    # Asked just before each write: a drive started during a long restore is seen.
+    if d.parameter not in profile.changeable_while_running and await drive.running():
         report.add(d, False, f"{change} not written: needs the motor stopped, and the drive "
                    "is running (stop it, then restore again)")  # fmt: skip
         return
     refused = await drive.write(d.parameter, d.left.value, persist=persist)
     if refused is not None:
         report.add(d, False, f"{change} refused by the drive: {refused.text} "
-                   f"(error {refused.code})")  # fmt: skip
+                   f"(error {refused.code})", drive_refused=True)  # fmt: skip
         return
     back = await drive.read(d.parameter)
     entry = Entry.of(d.name, back)

@@ -210,3 +210,49 @@ async def test_enc_round_trip_and_a_refused_write_reported(tmp_path: Path) -> No
         assert drive.parameters[0x0008] == 50  # F0.08 restored and verified
         assert drive.parameters[0x0009] == 50
         assert "1 written and verified, 1 not written" in out
+
+
+async def test_fc_restore_on_a_running_drive_writes_only_what_may_change_in_operation(
+    tmp_path: Path,
+) -> None:
+    backup = tmp_path / "drive1.yaml"
+    running = DriveSettings(running_hz=20.0)
+    async with commissioning.served(FC_LINE, [(1, DriveSettings()), (2, running)]) as server:
+        code, _, err = await params(
+            server, "danfoss-fc", "backup", "--address", "1", "-o", str(backup)
+        )
+        assert code == 0, err
+        moving = sim_drive(server, 2, FcSimDrive)
+        moving.parameters.set(341, 900)  # 3-41 ramp: changeable while running
+        moving.parameters.set(412, 50)  # 4-12 low speed limit: only while stopped
+        code, out, err = await params(
+            server, "danfoss-fc", "restore", "--address", "2", str(backup)
+        )
+        assert code == 1, err + out
+        lines = {line.split()[0]: line for line in out.splitlines() if line[:1].isdigit()}
+        assert "read back 3 s" in lines["3-41"]
+        assert "needs the motor stopped" in lines["4-12"]
+        assert "talks on the line" in lines["8-31"]  # the other drive's address: never written
+        assert (moving.parameters[341], moving.parameters[412]) == (300, 50)
+        assert moving.parameters[831] == 2
+
+
+async def test_fc_restore_writes_a_bounded_value_once_its_bound_is_in(tmp_path: Path) -> None:
+    backup = tmp_path / "drive1.yaml"
+    async with commissioning.served(FC_LINE, [(1, DriveSettings())]) as server:
+        code, _, err = await params(
+            server, "danfoss-fc", "backup", "--address", "1", "-o", str(backup)
+        )
+        assert code == 0, err
+        data = saved(backup)
+        data["parameters"]["4-12"].update(value=30.0, raw=300)
+        data["parameters"]["4-14"].update(value=40.0, raw=400)
+        backup.write_text(yaml.safe_dump(data))
+        drive = sim_drive(server, 1, FcSimDrive)
+        drive.parameters.set(414, 200)  # 20 Hz: 4-12 = 30 Hz is refused until 4-14 moves
+        code, out, err = await params(
+            server, "danfoss-fc", "restore", "--address", "1", str(backup)
+        )
+        assert code == 0, err + out
+        assert (drive.parameters[412], drive.parameters[414]) == (300, 400)
+        assert "2 written and verified, 0 not written" in out
