@@ -8,6 +8,8 @@ tool reports is checked against what the drive really holds.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import os
 import sys
 from pathlib import Path
 from typing import Any, TypeVar
@@ -256,3 +258,32 @@ async def test_fc_restore_writes_a_bounded_value_once_its_bound_is_in(tmp_path: 
         assert code == 0, err + out
         assert (drive.parameters[412], drive.parameters[414]) == (300, 400)
         assert "2 written and verified, 0 not written" in out
+
+
+async def test_a_progress_bar_on_a_terminal_and_none_in_a_pipe(tmp_path: Path) -> None:
+    main, terminal = os.openpty()
+    try:
+        async with commissioning.served(FC_LINE, [(1, DriveSettings())]) as server:
+            process = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "fcmaster", "params", "backup", "--port", server.device,
+                "--address", "1", "-o", str(tmp_path / "set.yaml"),
+                stdout=asyncio.subprocess.DEVNULL, stderr=terminal,
+            )  # fmt: skip
+            assert await process.wait() == 0
+        os.set_blocking(main, False)
+        shown = b""
+        with contextlib.suppress(BlockingIOError, OSError):
+            while chunk := os.read(main, 4096):
+                shown += chunk
+    finally:
+        os.close(main)
+        os.close(terminal)
+    text = shown.decode()
+    assert "\r[" in text
+    assert "] 24/24" in text  # 5 identity texts and 19 settings
+    # Through a pipe (every other test): the summary only, no bar.
+    async with commissioning.served(FC_LINE, [(1, DriveSettings())]) as server:
+        code, _, err = await params(server, "danfoss-fc", "backup", "--address", "1")
+    assert code == 0
+    assert "[" not in err
+    assert "19 parameters saved" in err
