@@ -214,7 +214,7 @@ async def test_enc_round_trip_and_a_refused_write_reported(tmp_path: Path) -> No
         assert "1 written and verified, 1 not written" in out
 
 
-async def test_fc_restore_on_a_running_drive_writes_only_what_may_change_in_operation(
+async def test_fc_restore_on_a_running_drive_writes_nothing_that_needs_it_stopped(
     tmp_path: Path,
 ) -> None:
     backup = tmp_path / "drive1.yaml"
@@ -225,18 +225,19 @@ async def test_fc_restore_on_a_running_drive_writes_only_what_may_change_in_oper
         )
         assert code == 0, err
         moving = sim_drive(server, 2, FcSimDrive)
-        moving.parameters.set(341, 900)  # 3-41 ramp: changeable while running
-        moving.parameters.set(412, 50)  # 4-12 low speed limit: only while stopped
+        moving.parameters.set(341, 900)  # 3-41 ramp: the simulator would even take it running
+        moving.parameters.set(412, 50)  # 4-12 low speed limit
         code, out, err = await params(
             server, "danfoss-fc", "restore", "--address", "2", str(backup)
         )
         assert code == 1, err + out
         lines = {line.split()[0]: line for line in out.splitlines() if line[:1].isdigit()}
-        assert "read back 3 s" in lines["3-41"]
+        assert "needs the motor stopped" in lines["3-41"]
         assert "needs the motor stopped" in lines["4-12"]
         assert "talks on the line" in lines["8-31"]  # the other drive's address: never written
-        assert (moving.parameters[341], moving.parameters[412]) == (300, 50)
+        assert (moving.parameters[341], moving.parameters[412]) == (900, 50)
         assert moving.parameters[831] == 2
+        assert "0 written and verified, 3 not written" in out
 
 
 async def test_fc_restore_writes_a_bounded_value_once_its_bound_is_in(tmp_path: Path) -> None:

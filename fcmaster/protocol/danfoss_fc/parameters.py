@@ -269,13 +269,11 @@ IDENTITY: Final = tuple(
     for number in ("15-40", "15-41", "15-42", "15-43", "15-51")
 )
 IDENTITY_MATCH: Final = frozenset({"15-40"})  # FC type: a set fits drives of its own type
-# The programming guides mark each parameter "change during operation" TRUE or FALSE; a
-# drive answers error 17 to a FALSE one while running. Of the table's members, only the
-# ramp times and the control-word timeout are taken as changeable while the motor turns:
-# they change no speed or limit by themselves. The others (references, speed limits, jog
-# speed, response delays) are written only while stopped, whatever the drive would allow.
-CHANGEABLE_WHILE_RUNNING: Final = frozenset(
-    {"3-41", "3-42", "3-51", "3-52", "3-81", "8-03", "8-04"}
-)
+# The programming guides mark each parameter "change during operation" TRUE or FALSE, and a
+# drive reports it as bit 13 of description element 21 (FC 300 Design Guide, "additional
+# characteristics"); a FALSE one written while running is refused with error 17. Those
+# marks for this table's members were not at hand, so none is taken as changeable while the
+# motor turns: a restore writes them only while stopped. Fill in from the guide's lists.
+CHANGEABLE_WHILE_RUNNING: Final[frozenset[str]] = frozenset()
 # Protocol, address, baud rate, parity: a restore that changed them would lose the drive.
 LINK_SETTINGS: Final = frozenset({"8-30", "8-31", "8-32", "8-33"})
