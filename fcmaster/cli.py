@@ -263,8 +263,8 @@ def _params_parser(commands: Any) -> None:
         help="write a saved set back, verifying each value",
         description="Write the parameters that differ from FILE, each read back to verify. "
         "While the drive runs, only parameters known to be changeable in operation are "
-        "written; line settings (address, baud, parity, protocol) are never written. Exit 0 "
-        "when every difference was written and verified, 1 otherwise.",
+        "written; line settings (address, baud, parity, protocol) are left alone. Exit 0 "
+        "when every other difference was written and verified, 1 otherwise.",
     )
     _line_options(restore)
     restore.add_argument("--address", type=int, required=True)

@@ -216,13 +216,14 @@ async def restore(
                 await _restore_one(drive, profile, change, persist=persist, report=report)
         if wanted and tty:
             sys.stderr.write("\n")
-    for line in report.lines:
+    for line in [*report.lines, *report.left_alone]:
         print(line)
     for d in compare(saved, current):
         if not _restorable(d):
             print(f"{d.parameter:<8} {d.name}: not restored ({_why_not(d)})")
     print(
         f"{report.written} written and verified, {report.failed} not written, "
+        f"{len(report.left_alone)} line settings left alone, "
         f"{len(saved.parameters) - len(wanted)} already equal or not restorable"
     )
     return 0 if report.failed == 0 else 1
@@ -244,6 +245,7 @@ class _Report:
     def __init__(self) -> None:
         self.outcomes: dict[str, tuple[bool, str]] = {}
         self.refused_by_drive: set[str] = set()
+        self.left_alone: list[str] = []  # line settings: deliberately not restored
 
     def add(self, d: Difference, ok: bool, text: str, *, drive_refused: bool = False) -> None:
         self.outcomes[d.parameter] = (ok, f"{d.parameter:<8} {d.name}: {text}")
@@ -272,8 +274,10 @@ async def _restore_one(
     assert isinstance(d.left.value, float)
     change = f"{_side(d.right)} → {d.left.shown()}"
     if d.parameter in profile.link_settings:
-        report.add(d, False, f"{change} not written: it sets how the drive talks on the line; "
-                   "change it with fcmaster write, then the line options")  # fmt: skip
+        report.left_alone.append(
+            f"{d.parameter:<8} {d.name}: {change} left alone: it sets how the drive talks on "
+            "the line; change it with fcmaster write, then the line options"
+        )
         return
     # Asked just before each write: a drive started during a long restore is seen.
     if d.parameter not in profile.changeable_while_running and await drive.running():

@@ -234,10 +234,10 @@ async def test_fc_restore_on_a_running_drive_writes_nothing_that_needs_it_stoppe
         lines = {line.split()[0]: line for line in out.splitlines() if line[:1].isdigit()}
         assert "needs the motor stopped" in lines["3-41"]
         assert "needs the motor stopped" in lines["4-12"]
-        assert "talks on the line" in lines["8-31"]  # the other drive's address: never written
+        assert "left alone" in lines["8-31"]  # the other drive's address: never written
         assert (moving.parameters[341], moving.parameters[412]) == (900, 50)
         assert moving.parameters[831] == 2
-        assert "0 written and verified, 3 not written" in out
+        assert "0 written and verified, 2 not written, 1 line settings left alone" in out
 
 
 async def test_fc_restore_writes_a_bounded_value_once_its_bound_is_in(tmp_path: Path) -> None:
