@@ -131,12 +131,9 @@ async def backup(options: LineOptions, address: int, output: Path | None) -> int
         partial.write_text(text, encoding="utf-8")
         partial.replace(output)  # a reader never sees half a file
     refused = [k for k, e in found.parameters.items() if e.refused is not None]
-    print(
-        f"{len(found.parameters) - len(refused)} parameters saved"
-        + (f"; the drive refused to read {', '.join(refused)}" if refused else "")
-        + (f" to {output}" if output else ""),
-        file=sys.stderr,
-    )
+    where = f" to {output}" if output else ""
+    also = f"; the drive refused to read {', '.join(refused)}" if refused else ""
+    print(f"{len(found.parameters) - len(refused)} parameters saved{where}{also}", file=sys.stderr)
     return 0
 
 
