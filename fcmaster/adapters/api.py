@@ -41,8 +41,14 @@ from fcmaster.adapters.middleware import (
     replaying,
     states_json,
 )
+from fcmaster.adapters.parameter_sets import (
+    Pace,
+    ReadFailed,
+    drift,
+    fleet_drift,
+    read_drive_set,
+)
 from fcmaster.adapters.readlimit import ReadsBusy, ViewerReads
-from fcmaster.adapters.parameter_sets import ReadFailed, drift, fleet_drift, read_drive_set
 from fcmaster.adapters.schemas import (
     CommandUnion,
     DriveOut,
@@ -56,8 +62,8 @@ from fcmaster.adapters.schemas import (
 from fcmaster.adapters.stream import StreamRegistry, serve_stream
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.errors import UsageError
-from fcmaster.state import AvailabilityChanged, CommandCompleted, ConditionChanged, rfc3339
 from fcmaster.protocol.parameter_set import ParameterSet
+from fcmaster.state import AvailabilityChanged, CommandCompleted, ConditionChanged, rfc3339
 
 log = structlog.get_logger("fcmaster.adapters.http")
 
@@ -376,13 +382,20 @@ def create_app(
 
     # -- parameter sets ----------------------------------------------------------------
 
+    def pace(principal: Principal) -> Pace | None:
+        """A viewer's reads take turns of the line's viewer-read spacing; an operator's not."""
+        return None if principal.can(Role.OPERATOR) else viewer_reads.turn
+
     async def current_set(name: str, principal: Principal) -> ParameterSet | Response:
         try:
-            return await read_drive_set(gateway, name, actor=principal.name)
+            return await read_drive_set(gateway, name, actor=principal.name, pace=pace(principal))
         except KeyError:
             raise HTTPException(404, f"no drive called {name!r}") from None
         except ReadFailed as failed:
             return result_response(failed.result, parameter=failed.parameter)
+        except ReadsBusy as exc:
+            reason = f"{exc}: try again shortly"
+            return json_response(error_body(reason), 429, headers={"Retry-After": "1"})
 
     @app.get(
         "/api/v1/drives/{name}/parameters",
@@ -391,7 +404,8 @@ def create_app(
     async def parameter_set(name: str, principal: Viewer) -> Response:
         """The drive's parameter set: identity and every writable parameter, read now.
 
-        Read one parameter at a time as ordinary reads, behind the line's idle poll. The
+        Read one parameter at a time as ordinary reads, behind the line's idle poll (a
+        viewer's at the line's viewer-read pace, so a set takes seconds). The
         body has the form of an ``fcmaster params backup`` file; a parameter the drive
         refuses to read carries ``refused`` with the drive's code instead of a value.
         """
@@ -427,7 +441,7 @@ def create_app(
     ) -> Response:
         """Each drive named in the body (``{drive: saved set, …}``) against its set."""
         try:
-            report = await fleet_drift(gateway, body, actor=principal.name)
+            report = await fleet_drift(gateway, body, actor=principal.name, pace=pace(principal))
         except UsageError as exc:
             return json_response({"outcome": "invalid", **error_body(str(exc))}, 422)
         return json_response(report)
