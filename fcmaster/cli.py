@@ -234,6 +234,8 @@ def build_parser() -> argparse.ArgumentParser:
     monitor.add_argument("--once", action="store_true", help="print one table and exit")
     monitor.add_argument("--interval", type=float, default=0.5, help="seconds between redraws")
 
+    _params_parser(commands)
+
     decode = commands.add_parser(
         "decode",
         help="explain a captured frame field by field",
@@ -251,6 +253,48 @@ def build_parser() -> argparse.ArgumentParser:
     decode.add_argument("--json", action="store_true", help="print JSON")
     decode.add_argument("frame", nargs="+", metavar="FRAME")
     return parser
+
+
+def _params_parser(commands: Any) -> None:
+    """`params backup | diff | restore`: a drive's parameter set to a file and back."""
+    params = commands.add_parser("params", help="back up, compare and restore parameter sets")
+    verbs = params.add_subparsers(dest="params_command", required=True, metavar="VERB")
+    backup = verbs.add_parser(
+        "backup", help="every writable parameter of a drive, with its identity, to YAML"
+    )
+    _line_options(backup)
+    backup.add_argument("--address", type=int, required=True)
+    backup.add_argument("-o", "--output", type=Path, metavar="FILE", help="default: stdout")
+    diff = verbs.add_parser(
+        "diff",
+        help="a drive against a file, or two files",
+        description="Compare a drive with a saved set (--port, --address, FILE) or two saved "
+        "sets (FILE FILE). Exit codes: 0 the settings are equal, 1 they differ (or the drive "
+        "could not be read), 2 bad input. Identity (serial numbers) is shown, not compared.",
+    )
+    _line_options(diff)
+    for action in diff._actions:
+        if action.dest == "port":
+            action.required = False  # two files need no port
+    diff.add_argument("--address", type=int)
+    diff.add_argument("files", nargs="+", type=Path, metavar="FILE")
+    restore = verbs.add_parser(
+        "restore",
+        help="write a saved set back, verifying each value",
+        description="Write the parameters that differ from FILE, each read back to verify. "
+        "While the drive runs, only parameters known to be changeable in operation are "
+        "written; line settings (address, baud, parity, protocol) are left alone. Exit 0 "
+        "when every other difference was written and verified, 1 otherwise.",
+    )
+    _line_options(restore)
+    restore.add_argument("--address", type=int, required=True)
+    restore.add_argument(
+        "--force", action="store_true", help="restore a set saved from another drive type"
+    )
+    restore.add_argument(
+        "--ram-only", action="store_true", help="not to non-volatile memory (lost at power-off)"
+    )
+    restore.add_argument("file", type=Path, metavar="FILE")
 
 
 def _run_async(coro: Coroutine[Any, Any, int]) -> int:
@@ -387,6 +431,21 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     return _run_async(monitor.run(args.url, args.token, once=args.once, interval_s=args.interval))
 
 
+def _cmd_params(args: argparse.Namespace) -> int:
+    from fcmaster.commands import params
+
+    if args.params_command == "backup":
+        return _run_async(params.backup(_options(args), args.address, args.output))
+    if args.params_command == "diff":
+        options = _options(args) if args.port else None
+        return _run_async(params.diff(options, args.address, args.files))
+    return _run_async(
+        params.restore(
+            _options(args), args.address, args.file, force=args.force, persist=not args.ram_only
+        )
+    )
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "run": _cmd_run,
     "check": _cmd_check,
@@ -401,6 +460,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "monitor": _cmd_monitor,
     "ports": _cmd_ports,
     "doctor": _cmd_doctor,
+    "params": _cmd_params,
 }
 
 

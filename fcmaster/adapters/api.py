@@ -41,6 +41,13 @@ from fcmaster.adapters.middleware import (
     replaying,
     states_json,
 )
+from fcmaster.adapters.parameter_sets import (
+    Pace,
+    ReadFailed,
+    drift,
+    fleet_drift,
+    read_drive_set,
+)
 from fcmaster.adapters.readlimit import ReadsBusy, ViewerReads
 from fcmaster.adapters.schemas import (
     CommandUnion,
@@ -55,6 +62,7 @@ from fcmaster.adapters.schemas import (
 from fcmaster.adapters.stream import StreamRegistry, serve_stream
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.errors import UsageError
+from fcmaster.protocol.parameter_set import ParameterSet
 from fcmaster.state import AvailabilityChanged, CommandCompleted, ConditionChanged, rfc3339
 
 log = structlog.get_logger("fcmaster.adapters.http")
@@ -371,6 +379,72 @@ def create_app(
             "persist": body.persist,
         }
         return await run(name, payload, principal, parameter=param, index=index)
+
+    # -- parameter sets ----------------------------------------------------------------
+
+    def pace(principal: Principal) -> Pace | None:
+        """A viewer's reads take turns of the line's viewer-read spacing; an operator's not."""
+        return None if principal.can(Role.OPERATOR) else viewer_reads.turn
+
+    async def current_set(name: str, principal: Principal) -> ParameterSet | Response:
+        try:
+            return await read_drive_set(gateway, name, actor=principal.name, pace=pace(principal))
+        except KeyError:
+            raise HTTPException(404, f"no drive called {name!r}") from None
+        except ReadFailed as failed:
+            return result_response(failed.result, parameter=failed.parameter)
+        except ReadsBusy as exc:
+            reason = f"{exc}: try again shortly"
+            return json_response(error_body(reason), 429, headers={"Retry-After": "1"})
+
+    @app.get(
+        "/api/v1/drives/{name}/parameters",
+        responses={k: v for k, v in _COMMAND_ERRORS.items() if k not in (400, 403, 413)},
+    )
+    async def parameter_set(name: str, principal: Viewer) -> Response:
+        """The drive's parameter set: identity and every writable parameter, read now.
+
+        Read one parameter at a time as ordinary reads, behind the line's idle poll (a
+        viewer's at the line's viewer-read pace, so a set takes seconds). The
+        body has the form of an ``fcmaster params backup`` file; a parameter the drive
+        refuses to read carries ``refused`` with the drive's code instead of a value.
+        """
+        found = await current_set(name, principal)
+        return found if isinstance(found, Response) else json_response(found.to_dict())
+
+    @app.post(
+        "/api/v1/drives/{name}/parameters/diff",
+        responses={k: v for k, v in _COMMAND_ERRORS.items() if k != 403},
+    )
+    async def parameter_drift(
+        name: str, body: Annotated[dict[str, Any], Body()], principal: Viewer
+    ) -> Response:
+        """The drive against a saved set (a backup file as JSON): what differs now."""
+        try:
+            saved = ParameterSet.from_dict(body, source="the body")
+        except UsageError as exc:
+            return json_response({"outcome": "invalid", **error_body(str(exc))}, 422)
+        found = await current_set(name, principal)
+        if isinstance(found, Response):
+            return found
+        if saved.protocol != found.protocol:
+            reason = f"a {saved.protocol} set for a {found.protocol} drive"
+            return json_response({"outcome": "invalid", **error_body(reason)}, 422)
+        return json_response(drift(name, saved, found))
+
+    @app.post(
+        "/api/v1/parameters/diff",
+        responses={k: v for k, v in _COMMAND_ERRORS.items() if k != 403},
+    )
+    async def fleet_parameter_drift(
+        body: Annotated[dict[str, Any], Body()], principal: Viewer
+    ) -> Response:
+        """Each drive named in the body (``{drive: saved set, …}``) against its set."""
+        try:
+            report = await fleet_drift(gateway, body, actor=principal.name, pace=pace(principal))
+        except UsageError as exc:
+            return json_response({"outcome": "invalid", **error_body(str(exc))}, 422)
+        return json_response(report)
 
     # -- metrics, stream, dashboard ----------------------------------------------------
 

@@ -258,3 +258,22 @@ def lookup(pnu: int) -> ParameterSpec:
     if spec is None:
         return ParameterSpec(pnu=pnu, name="", data_type=None)
     return spec
+
+
+# -- parameter sets (fcmaster.protocol.parameter_set) ------------------------------------
+
+# A set is every writable parameter of the table, in table order.
+SET_MEMBERS: Final = tuple((s.number, s.name) for s in PARAMETERS.values() if s.writable)
+IDENTITY: Final = tuple(
+    (number, PARAMETERS[parse_parameter(number)].name)
+    for number in ("15-40", "15-41", "15-42", "15-43", "15-51")
+)
+IDENTITY_MATCH: Final = frozenset({"15-40"})  # FC type: a set fits drives of its own type
+# The programming guides mark each parameter "change during operation" TRUE or FALSE, and a
+# drive reports it as bit 13 of description element 21 (FC 300 Design Guide, "additional
+# characteristics"); a FALSE one written while running is refused with error 17. Those
+# marks for this table's members were not at hand, so none is taken as changeable while the
+# motor turns: a restore writes them only while stopped. Fill in from the guide's lists.
+CHANGEABLE_WHILE_RUNNING: Final[frozenset[str]] = frozenset()
+# Protocol, address, baud rate, parity: a restore that changed them would lose the drive.
+LINK_SETTINGS: Final = frozenset({"8-30", "8-31", "8-32", "8-33"})

@@ -200,3 +200,18 @@ def decode_status(word: int, fault_code: int) -> DriveStatus:
         at_reference=False,
         reverse=bool(word & StateWord.REVERSE),
     )
+
+
+# -- parameter sets (fcmaster.protocol.parameter_set) ------------------------------------
+
+# A set is every function code of the table, in table order.
+SET_MEMBERS: Final = tuple(
+    (format_parameter(make_code(Command.READ_PARAMETER, index)), spec.name)
+    for index, spec in FUNCTION_CODES.items()
+)
+IDENTITY: Final = (("15/0000", VERSION_SPEC.name),)
+IDENTITY_MATCH: Final[frozenset[str]] = frozenset()  # a version number says nothing of fit
+# The manual marks F2.14-F2.17 and F2.53 as changed only while stopped; it gives no marks
+# for the F0 codes, so none is taken as changeable while running.
+CHANGEABLE_WHILE_RUNNING: Final[frozenset[str]] = frozenset()
+LINK_SETTINGS: Final = frozenset({"F2.14", "F2.15", "F2.53"})  # baud/format, address, frames

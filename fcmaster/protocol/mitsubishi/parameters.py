@@ -213,3 +213,19 @@ def key_value(key: ParameterKey, raw: int, text: str | None = None) -> Parameter
     return ParameterValue(
         parameter=key, index=0, raw=raw, value=value, unit=target.unit, title=target.name
     )
+
+
+# -- parameter sets (fcmaster.protocol.parameter_set) ------------------------------------
+
+# A set is every parameter of the table (Pr.0-Pr.899 are settings), in number order.
+SET_MEMBERS: Final = tuple((f"Pr.{n}", s.name) for n, s in sorted(PARAMETERS.items()))
+IDENTITY: Final = (("H7C", "model name"),)
+IDENTITY_MATCH: Final = frozenset({"H7C"})
+# With Pr.77 = 0 (factory) a link write is accepted only while stopped (§8); the manuals'
+# list of parameters writable during operation was not at hand, so none is taken as such.
+CHANGEABLE_WHILE_RUNNING: Final[frozenset[str]] = frozenset()
+# Station number, speed, format, parity, waiting time, terminator, protocol, and the
+# operation mode (Pr.79): changing any of them mid-restore cuts this master off the drive.
+LINK_SETTINGS: Final = frozenset(
+    f"Pr.{n}" for n in (79, 117, 118, 119, 120, 123, 124, 331, 332, 333, 334, 337, 341, 549)
+)

@@ -1,0 +1,108 @@
+"""Parameter sets: what each protocol's set holds, how sets compare, what a file may say."""
+
+from __future__ import annotations
+
+import pytest
+
+from fcmaster.errors import UsageError
+from fcmaster.protocol.codec import DriveError, ParameterKey, ParameterValue
+from fcmaster.protocol.parameter_set import (
+    Entry,
+    ParameterSet,
+    compare,
+    identity_mismatches,
+    profile_for,
+    read_set,
+)
+
+
+def fc_set(**raws: int) -> ParameterSet:
+    out = ParameterSet(protocol="danfoss-fc", address=1)
+    out.identity["15-40"] = Entry(name="FC Type", value="FC-302")
+    for key, raw in raws.items():
+        out.parameters[key.replace("_", "-").lstrip("p")] = Entry(
+            name=key, value=raw / 100, unit="s", raw=raw
+        )
+    return out
+
+
+def test_each_protocols_set_is_its_writable_settings_and_names_the_codecs_way() -> None:
+    fc = profile_for("danfoss-fc")
+    members = [key for key, _ in fc.members]
+    assert "3-41" in members
+    assert "16-13" not in members  # a reading
+    assert "15-40" not in members  # identity, read-only text
+    assert [key for key, _ in fc.identity][:1] == ["15-40"]
+    assert "8-31" in fc.link_settings
+    assert fc.changeable_while_running <= set(members)
+    mitsubishi = profile_for("mitsubishi")
+    assert ("Pr.7", "acceleration time") in mitsubishi.members
+    assert mitsubishi.changeable_while_running == frozenset()
+    enc = profile_for("enc")
+    assert ("F0.08", "Acceleration time 1") in enc.members
+    assert {"F2.14", "F2.15"} <= enc.link_settings
+    with pytest.raises(UsageError):
+        profile_for("modbus")
+
+
+def test_compare_goes_by_raw_and_reports_refusals_and_absences() -> None:
+    left = fc_set(p3_41=300, p3_42=300)
+    right = fc_set(p3_41=300, p3_42=450)
+    right.parameters["3-41"] = Entry(name="x", value=3.0000001, unit="s", raw=300)
+    right.parameters["8-36"] = Entry(name="late", refused=DriveError(0, "no such parameter"))
+    differences = compare(left, right)
+    assert [(d.parameter, d.left is None, d.right is None) for d in differences] == [
+        ("3-42", False, False),
+        ("8-36", True, False),
+    ]
+    assert differences[1].right is not None
+    assert differences[1].right.shown() == "refused (error 0: no such parameter)"
+    assert compare(left, left) == []
+    with pytest.raises(UsageError, match="cannot compare"):
+        compare(left, ParameterSet(protocol="enc", address=1))
+
+
+def test_a_set_survives_its_file_form_and_a_bad_one_names_every_problem() -> None:
+    original = fc_set(p3_41=300)
+    original.parameters["8-36"] = Entry(name="late", refused=DriveError(0, "gone"))
+    again = ParameterSet.from_dict(original.to_dict())
+    assert again == original
+    with pytest.raises(UsageError) as caught:
+        ParameterSet.from_dict(
+            {"format": "other", "protocol": "profibus", "parameters": {"3-41": {"value": True}}}
+        )
+    message = str(caught.value)
+    for part in ("format", "protocol", "address", "3-41.value"):
+        assert part in message
+    with pytest.raises(UsageError):
+        ParameterSet.from_dict(["not", "a", "mapping"])
+
+
+def test_identity_must_match_on_the_type_not_the_serial_number() -> None:
+    profile = profile_for("danfoss-fc")
+    saved, drive = fc_set(), fc_set()
+    saved.identity["15-51"] = Entry(name="serial", value="A1")
+    drive.identity["15-51"] = Entry(name="serial", value="B2")
+    assert identity_mismatches(profile, saved, drive) == []
+    drive.identity["15-40"] = Entry(name="FC Type", value="FC-301")
+    assert identity_mismatches(profile, saved, drive) == [
+        "15-40 (FC Type): the file says FC-302, the drive FC-301"
+    ]
+
+
+async def test_read_set_reads_identity_then_members_and_keeps_refusals() -> None:
+    profile = profile_for("enc")
+    asked: list[str] = []
+
+    async def read(name: str) -> ParameterValue | DriveError:
+        asked.append(name)
+        if name == "F2.17":
+            return DriveError(30, "refused")
+        return ParameterValue(parameter=ParameterKey(name, 0), index=0, raw=7, value=7.0, unit="")
+
+    progress: list[tuple[int, int]] = []
+    found = await read_set(profile, 5, read, on_progress=lambda d, t, _: progress.append((d, t)))
+    assert asked == ["15/0000", *(key for key, _ in profile.members)]
+    assert found.parameters["F2.17"].refused == DriveError(30, "refused")
+    assert found.parameters["F0.08"].raw == 7
+    assert progress[-1] == (len(asked), len(asked))
