@@ -9,6 +9,7 @@ folded into the fleet state exactly as a BusMaster reports them, through
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
+from typing import Any
 
 from fcmaster.adapters.gateway import LineInfo
 from fcmaster.bus.commands import Command, CommandResult, Outcome
@@ -53,6 +54,7 @@ class FakeGateway:
         self.fleet = FleetState(lines, emit=self.hub.publish, clock=self.clock)
         self.stats = {line.name: LineStats(up_since=self.clock.now()) for line in lines}
         self.up = {line.name: True for line in lines}
+        self.adapters: dict[str, dict[str, Any]] = {}  # the USB adapter a line's port is on
         self.respond = respond
         self.executed: list[tuple[str, Command]] = []
 
@@ -74,6 +76,7 @@ class FakeGateway:
                 up=self.up[line.name],
                 drives=tuple(d.name for d in line.drives),
                 stats=self.stats[line.name].to_json(now),
+                adapter=self.adapters.get(line.name),
             )
             for line in self.plans
         ]

@@ -113,6 +113,27 @@ async def test_the_dashboard_lists_the_fleet_and_follows_changes_live(browser: B
         assert problems == []
 
 
+async def test_a_line_card_names_its_usb_adapter_and_flags_a_slow_latency_timer(
+    browser: Browser,
+) -> None:
+    gateway = FakeGateway()
+    gateway.adapters["line1"] = {
+        "device": "/dev/ttyUSB0",
+        "driver": "ftdi_sio",
+        "by_id": "/dev/serial/by-id/usb-FTDI_USB-RS485_Cable_FT1ABC-if00-port0",
+        "by_path": None,
+        "latency_ms": 16,
+    }
+    async with serving(gateway, http_model(anonymous="viewer")) as adapter:
+        page, problems = await _open(browser, adapter.url + "/")
+        shown = page.locator('[data-bus="line1"]').get_by_test_id("adapter")
+        await expect(shown).to_have_text(
+            "usb-FTDI_USB-RS485_Cable_FT1ABC-if00-port0 · ftdi_sio · latency 16 ms"
+        )
+        await expect(shown).to_have_class(re.compile(r"\bwarn\b"))
+        assert problems == []
+
+
 async def test_an_operator_commands_a_drive_only_after_confirming(browser: Browser) -> None:
     gateway = FakeGateway()
     gateway.reply("pump-1", running=True, hz=30.0)

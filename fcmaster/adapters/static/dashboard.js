@@ -402,6 +402,26 @@ function sumOf(stats, keys) {
   return present.length ? present.reduce((total, k) => total + stats[k], 0) : null;
 }
 
+// A USB adapter holds short replies back for its latency timer: above 1 ms it costs the line
+// transactions, so the card says so (the daemon has logged the udev rule that fixes it).
+function adapterText(adapter) {
+  const name = adapter.by_id ? adapter.by_id.split("/").pop() : adapter.device;
+  const latency = adapter.latency_ms == null ? "no latency timer" : `latency ${adapter.latency_ms} ms`;
+  return [name, adapter.driver, latency].filter(Boolean).join(" · ");
+}
+
+function renderAdapter(card, adapter) {
+  if (!card.adapter) {
+    card.adapter = el("div", { class: "muted small", "data-testid": "adapter" });
+    card.where.after(card.adapter);
+  }
+  put(card.adapter, adapter ? adapterText(adapter) : "");
+  card.adapter.hidden = !adapter;
+  const slow = Boolean(adapter && adapter.latency_ms > 1);
+  card.adapter.classList.toggle("warn", slow);
+  card.adapter.title = slow ? "the adapter's latency timer slows every reply: set it to 1 ms (udev rule in the log)" : "";
+}
+
 function renderLines() {
   const box = $("lines");
   for (const bus of fleet.buses.values()) {
@@ -430,6 +450,7 @@ function renderLines() {
     card.pill.title = silent ? "every drive fell silent together: cable, adapter or power?" : (stats.down_reason || "");
     put(card.where, [bus.port, bus.protocol, bus.baudrate && `${bus.baudrate} Bd`, !bus.up && stats.down_reason]
       .filter(Boolean).join(" · "));
+    renderAdapter(card, bus.adapter);
     for (const [label, pick] of LINE_FACTS) put(card.facts.get(label), String(pick(stats) ?? "–"));
   }
 }
