@@ -47,8 +47,8 @@ reset never restarts a motor.
 
 Every command ends exactly once, reported as a :class:`Completion`: the master resolves
 the caller's future from it. A stop supersedes motion commands of the same drive that are
-still queued (they end ``cancelled``); a newer reference coalesces into a queued one (both
-end with the newer one's result). Neither touches a command whose step is in flight (the
+still queued (they end ``superseded``); a newer reference takes the place of a queued one
+(which ends ``superseded``, naming it). Neither touches a command whose step is in flight (the
 last step :meth:`Planner.next_step` handed out and not yet reported back): the drive may
 already be acting on it, and its reply must still find it at the head of its queue.
 
@@ -147,6 +147,10 @@ class Planner:
     def slot(self, name: str) -> DriveSlot:
         """The drive called ``name``; KeyError if the line has none."""
         return self._by_name[name]
+
+    def find(self, name: str) -> DriveSlot | None:
+        """The drive called ``name``; None if the line has none (or "*", the line)."""
+        return self._by_name.get(name)
 
     def submit(self, name: str | None, command: Command, ticket: object) -> list[Completion]:
         """Queue ``command`` for drive ``name`` (None: broadcast to the line).

@@ -11,6 +11,7 @@ import itertools
 import random
 
 import pytest
+import structlog.testing
 
 from fcmaster.bus.commands import Action, Command, Outcome
 from fcmaster.bus.master import BACKOFF_FIRST_S, BACKOFF_MAX_S
@@ -217,11 +218,26 @@ async def test_queued_references_coalesce_and_the_newest_wins() -> None:
         await b.clock.run_until(T0 + 0.2)
         await b.mid_transaction()
         drive = b.master.drive("a")
-        tasks = [b.submit(drive.set_reference(reference_pct=pct)) for pct in (20.0, 30.0, 40.0)]
-        for task in tasks:
-            await b.complete(task)
-        await b.clock.run_for(0.2)
-    assert [t.result().outcome for t in tasks] == [Outcome.DONE] * 3
+        with structlog.testing.capture_logs() as logs:
+            tasks = [b.submit(drive.set_reference(reference_pct=pct)) for pct in (20.0, 30.0, 40.0)]
+            for task in tasks:
+                await b.complete(task)
+            await b.clock.run_for(0.2)
+    assert [t.result().outcome for t in tasks] == [
+        Outcome.SUPERSEDED,
+        Outcome.SUPERSEDED,
+        Outcome.DONE,
+    ]
+    assert [t.result().reason for t in tasks[:2]] == [
+        "superseded by set_reference 30 %",
+        "superseded by set_reference 40 %",
+    ]
+    audit = [
+        (e["reference_pct"], e["frequency_hz"], e["outcome"])
+        for e in logs
+        if e["event"] == "command.completed"
+    ]
+    assert audit == [(20.0, 10.0, "superseded"), (30.0, 15.0, "superseded"), (40.0, 20.0, "done")]
     references = {t.pcd2 for _, t in b.requests(1)}
     assert encode_reference(40.0) in references
     assert not {encode_reference(20.0), encode_reference(30.0)} & references
@@ -243,7 +259,7 @@ async def test_stop_cancels_queued_start_jog_and_reference_of_that_drive_only() 
         await b.complete(other)
     for task in (start, jog, reference):
         result = task.result()
-        assert result.outcome is Outcome.CANCELLED
+        assert result.outcome is Outcome.SUPERSEDED
         assert result.reason == "superseded by stop"
     assert [t.result().outcome for t in (read, other, stop)] == [Outcome.DONE] * 3
     assert not [w for w in b.words(1) if w & ControlWord.START]
@@ -790,7 +806,12 @@ async def test_every_command_gets_exactly_one_outcome_also_at_shutdown() -> None
         await task
     outcomes = [task.result().outcome for task in tasks]
     assert Outcome.CANCELLED in outcomes
-    assert {o for o in outcomes} <= {Outcome.DONE, Outcome.TIMEOUT, Outcome.CANCELLED}
+    assert {o for o in outcomes} <= {
+        Outcome.DONE,
+        Outcome.TIMEOUT,
+        Outcome.CANCELLED,
+        Outcome.SUPERSEDED,
+    }
     reported = [id(command) for _, command, _ in b.observer.results]
     assert len(reported) == len(tasks) == len(set(reported))
     reasons = {r.reason for r in (t.result() for t in tasks) if r.outcome is Outcome.CANCELLED}

@@ -481,9 +481,9 @@ def test_stop_supersedes_queued_motion_commands_of_that_drive_only() -> None:
     p.submit("b", start(10.0), "other")
     ended = p.submit("a", STOP, "stop")
     assert [(c.tickets, c.result.outcome, c.result.reason) for c in ended] == [
-        (("start",), Outcome.CANCELLED, "superseded by stop"),
-        (("jog",), Outcome.CANCELLED, "superseded by stop"),
-        (("ref",), Outcome.CANCELLED, "superseded by stop"),
+        (("start",), Outcome.SUPERSEDED, "superseded by stop"),
+        (("jog",), Outcome.SUPERSEDED, "superseded by stop"),
+        (("ref",), Outcome.SUPERSEDED, "superseded by stop"),
     ]
     left = []
     while p.has_commands:
@@ -529,24 +529,54 @@ def test_at_shutdown_only_stops_and_the_command_on_the_wire_are_kept() -> None:
     assert not p.has_commands
 
 
-def test_stop_does_not_cancel_a_start_whose_first_attempt_failed() -> None:
+def test_stop_supersedes_a_start_waiting_for_its_retry_so_no_start_follows_the_stop() -> None:
     p = planner(A)
     adopted(p)
     p.submit("a", start(50.0), "start")
-    p.on_failure(take(p), 0.0, "no reply")
-    assert p.submit("a", STOP, "stop") == []
+    first = take(p)
+    assert telegram(first).pcd1 == RUN_WORD
+    p.on_failure(first, 0.0, "no reply")
+    ((ended,),) = [p.submit("a", Command(action=Action.STOP, actor="ops"), "stop")]
+    assert ended.tickets == ("start",)
+    assert ended.result.outcome is Outcome.SUPERSEDED
+    assert ended.result.reason.startswith("superseded by stop by ops (part of it went out")
+    words = []
+    for _ in range(4):
+        words.append(telegram(answer(p)[0]).pcd1)
+    assert words == [STOP_WORD] * 4  # start, stop, and never start again
 
 
 def test_queued_references_coalesce_and_the_newest_wins() -> None:
     p = planner(A)
     adopted(p, running=True, output_pct=10.0)
+    ended = []
     for pct in (20.0, 30.0, 40.0):
-        assert p.submit("a", set_reference(pct), pct) == []
+        ended += p.submit("a", set_reference(pct), pct)
+    assert [(c.tickets, c.result.outcome) for c in ended] == [
+        ((20.0,), Outcome.SUPERSEDED),
+        ((30.0,), Outcome.SUPERSEDED),
+    ]
     step, report = answer(p)
     assert telegram(step).pcd2 == encode_reference(40.0)
     ((completion,),) = [report.completions]
-    assert completion.tickets == (20.0, 30.0, 40.0)
+    assert completion.tickets == (40.0,)
     assert not p.has_commands
+
+
+def test_a_coalesced_reference_ends_superseded_naming_the_newer_one() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=10.0)
+    assert p.submit("a", set_reference(20.0), "first") == []
+    newer = Command(action=Action.SET_REFERENCE, reference_pct=30.0, actor="ops")
+    ((ended,),) = [p.submit("a", newer, "second")]
+    assert (ended.tickets, ended.command.reference_pct) == (("first",), 20.0)
+    assert ended.result.outcome is Outcome.SUPERSEDED
+    assert ended.result.reason == "superseded by set_reference 30 % by ops"
+    step, report = answer(p, running=True, output_pct=30.0)
+    assert telegram(step).pcd2 == encode_reference(30.0)
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("second",), Outcome.DONE)
+    ]
 
 
 def test_reference_does_not_coalesce_into_one_already_on_the_wire() -> None:
