@@ -30,8 +30,11 @@ good reply is *adopted*: a running drive is commanded to keep running at its pre
 and direction, a stopped one to stay stopped. A drive that returns from being demoted is
 adopted again unless the last command was a stop, and so is every drive once the line has
 been down (:meth:`Planner.on_line_down`), so a drive that comes back is never started by
-the master on its own. A trip (status fault rising) turns the intent into a stop,
-so a later reset does not restart the motor; a new start is needed.
+the master on its own. A motion command (start, jog, reference, direction, reset) that
+timed out may or may not have been applied, so neither it nor the previous intent is
+repeated: the drive is adopted again from its next good status. Reverting would pulse the
+motor (a start applied, its replies lost, then a stop). A trip (status fault rising) turns
+the intent into a stop, so a later reset does not restart the motor; a new start is needed.
 
 A command may take several exchanges (a Mitsubishi run is a frequency write and a run
 command; its parameter access selects the parameter page first). They go one after the
@@ -76,6 +79,7 @@ from fcmaster.bus.intents import (
     needs_learning,
     restarted,
     stopping_only,
+    unknown,
     without_reset,
 )
 from fcmaster.bus.plan import LinePlan, OnStart
@@ -343,7 +347,14 @@ class Planner:
                 pending.part = 0  # again from the start: what a first exchange selected may be gone
             if pending.attempts <= self.plan.retries:
                 return report  # stays at the head of its queue: retried next
+            sent = pending.phase is Phase.SENDING
             self._finish(pending, report, result_of(Outcome.TIMEOUT, reason))
+            action = pending.command.action
+            if sent and action.is_control and not action.is_urgent:
+                # The drive may or may not have applied it: adopt it again from its next
+                # good status. A stop that timed out is kept (it holds from being sent).
+                for target in self._targets(slot):
+                    unknown(target)
         if slot is not None:
             kind = None if step.kind is StepKind.COMMAND else step.kind
             # After the deadline a late reply may still be arriving: the line is not free.

@@ -855,3 +855,36 @@ async def test_status_word_bits_reach_the_observer_unchanged() -> None:
     assert status.warning
     assert status.word & StatusWord.BUS_CONTROL
     assert b.observer.replies[0][3] == ControlIntent(Motion.STOP)  # adopted from this reply
+
+
+# -- no pulses: a command that timed out is never undone -----------------------------------
+
+
+async def test_a_start_applied_with_its_replies_lost_is_adopted_never_stopped() -> None:
+    drive = FcDrive(1)
+    line = FcLine(drive)
+
+    def lose_start_replies(request: bytes) -> bytes | Timed | None:
+        reply = line(request)  # the drive acts on every request
+        if drive.received[-1].pcd1 & ControlWord.START and drive.received[-1].pke is None:
+            starts = [t for t in drive.received if t.pcd1 & ControlWord.START]
+            if len(starts) <= 2:  # the start and its retry: applied, unanswered
+                return None
+        return reply
+
+    b = bench(A, fc=[drive], responder=lose_start_replies, offline_after=99)
+    async with b.master:
+        await b.clock.run_until(T0 + 0.2)
+        assert b.words(1)[-1] == STOP_WORD  # adopted stopped
+        result = await b.complete(b.submit(b.master.drive("a").start(reference_pct=50.0)))
+        assert result.outcome is Outcome.TIMEOUT
+        sent_before = len(b.words(1))
+        await b.clock.run_for(0.5)
+    after = b.words(1)[sent_before:]
+    assert after, "the drive was polled after the timeout"
+    assert not [w for w in after if w & ControlWord.DATA_VALID and not w & ControlWord.START]
+    assert after[0] & ControlWord.DATA_VALID == 0  # the first poll commands nothing
+    assert after[-1] == RUN_WORD  # then what the drive shows: running at 50 %
+    assert {t.pcd2 for _, t in b.requests(1)[-3:]} == {encode_reference(50.0)}
+    assert drive.running
+    assert drive.output_pct == pytest.approx(50.0, abs=0.01)

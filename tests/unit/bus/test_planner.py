@@ -546,6 +546,41 @@ def test_stop_supersedes_a_start_waiting_for_its_retry_so_no_start_follows_the_s
     assert words == [STOP_WORD] * 4  # start, stop, and never start again
 
 
+@pytest.mark.parametrize(
+    ("applied", "word", "reference"),
+    [
+        pytest.param({"running": True, "output_pct": 50.0}, RUN_WORD, 50.0, id="applied"),
+        pytest.param({}, STOP_WORD, 0.0, id="not-applied"),
+    ],
+)
+def test_a_timed_out_start_is_followed_by_no_stop_and_the_drive_is_adopted_again(
+    applied: dict[str, Any], word: int, reference: float
+) -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    attempts = []
+    for n in range(2):
+        step = take(p, float(n))
+        assert telegram(step).pcd1 == RUN_WORD
+        attempts.append(p.on_failure(step, float(n), "no reply"))
+    assert results(*attempts) == [Outcome.TIMEOUT]
+    step, _ = answer(p, 2.0, **applied)  # the drive's state, whatever the start did
+    assert not telegram(step).pcd1 & ControlWord.DATA_VALID  # commands nothing, no stop
+    after = telegram(take(p, 3.0))
+    assert (after.pcd1, after.pcd2) == (word, encode_reference(reference))
+
+
+def test_a_timed_out_stop_is_kept() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=50.0)
+    p.submit("a", STOP, "stop")
+    for n in range(2):
+        p.on_failure(take(p, float(n)), float(n), "no reply")
+    step, _ = answer(p, 2.0, running=True, output_pct=50.0)
+    assert telegram(step).pcd1 == STOP_WORD
+
+
 def test_queued_references_coalesce_and_the_newest_wins() -> None:
     p = planner(A)
     adopted(p, running=True, output_pct=10.0)
