@@ -437,13 +437,19 @@ async def test_reset_is_a_one_telegram_pulse_of_bit_7() -> None:
     assert not b.drives[1].tripped
 
 
-async def test_drive_in_local_operation_refuses_bus_commands() -> None:
+async def test_drive_in_local_operation_leaves_a_start_unconfirmed_and_refuses_a_reference() -> (
+    None
+):
     b = bench(A, fc=[FcDrive(1, local=True)])
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
-        result = await b.complete(b.submit(b.master.drive("a").start(reference_pct=10.0)))
-    assert result.outcome is Outcome.REFUSED
-    assert "local operation" in result.reason
+        drive = b.master.drive("a")
+        started = await b.complete(b.submit(drive.start(reference_pct=10.0)))
+        referred = await b.complete(b.submit(drive.set_reference(reference_pct=20.0)))
+    assert started.outcome is Outcome.UNCONFIRMED
+    assert "local operation" in started.reason
+    assert referred.outcome is Outcome.REFUSED
+    assert "local operation" in referred.reason
     assert not b.drives[1].running
 
 

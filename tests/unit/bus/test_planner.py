@@ -24,8 +24,15 @@ from hypothesis.stateful import (
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
-from fcmaster.bus.planner import Completion, Planner, Report, Step, StepKind
-from fcmaster.protocol.codec import DriveError, DriveStatus, ParameterValue, Reply
+from fcmaster.bus.planner import Completion, Pending, Planner, Report, Step, StepKind
+from fcmaster.protocol.codec import (
+    Condition,
+    ConditionReport,
+    DriveError,
+    DriveStatus,
+    ParameterValue,
+    Reply,
+)
 from fcmaster.protocol.danfoss_fc import ControlWord, Telegram, decode_telegram, encode_reference
 from fcmaster.protocol.danfoss_fc.codec import ALARM_WORD, WARNING_WORD, FcCodec
 
@@ -379,14 +386,148 @@ def test_changed_alarm_or_warning_bit_reads_its_word_with_the_next_poll(
     assert telegram(take(p)).pnu == 1613
 
 
-def test_drive_in_local_operation_refuses_a_command() -> None:
+def test_drive_in_local_operation_leaves_a_start_unconfirmed() -> None:
     p = planner(A)
     adopted(p)
     p.submit("a", start(10.0), "start")
     _, report = answer(p, local=True)
     ((completion,),) = [report.completions]
+    assert completion.result.outcome is Outcome.UNCONFIRMED
+    assert "local operation" in completion.result.reason
+
+
+def test_drive_in_local_operation_refuses_a_reference() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=10.0)
+    p.submit("a", set_reference(20.0), "ref")
+    _, report = answer(p, local=True, running=True, output_pct=10.0)
+    ((completion,),) = [report.completions]
     assert completion.result.outcome is Outcome.REFUSED
     assert "local operation" in completion.result.reason
+
+
+def test_drive_that_goes_local_while_a_start_waits_leaves_it_unconfirmed() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(10.0), "start")
+    assert results(answer(p, 0.0)[1]) == []  # acknowledged, still stopped
+    _, report = answer(p, 0.1, local=True)
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("start",), Outcome.UNCONFIRMED)
+    ]
+    assert "local operation" in report.completions[0].result.reason
+
+
+# -- confirmation: done only once the status shows it ------------------------------------
+
+
+def test_start_is_done_once_the_status_shows_the_drive_running() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    step, report = answer(p, 0.0)  # acknowledged, the drive not running yet
+    assert telegram(step).pcd1 == RUN_WORD
+    assert results(report) == []
+    assert not p.has_commands
+    assert p.confirming == 1
+    assert results(answer(p, 0.5)[1]) == []
+    step, report = answer(p, 1.0, running=True, output_pct=20.0)
+    assert telegram(step).pcd1 == RUN_WORD
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("start",), Outcome.DONE)
+    ]
+
+
+def test_start_ignored_by_the_drive_is_unconfirmed_at_its_deadline() -> None:
+    p = planner(dataclasses.replace(A, confirm_s=2.0))
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    answer(p, 0.0)
+    assert results(answer(p, 1.999)[1]) == []
+    _, report = answer(p, 2.0)
+    ((completion,),) = [report.completions]
+    assert completion.result.outcome is Outcome.UNCONFIRMED
+    assert completion.result.reason == (
+        "not running after 2 s: the drive reports ready but stopped (status word 0x0207)"
+    )
+
+
+def test_start_is_unconfirmed_with_the_alarm_text_when_the_drive_trips() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    answer(p, 0.0)
+    assert results(answer(p, 0.1, fault=True)[1]) == []  # which alarm: read next
+    step = take(p, 0.2)
+    assert telegram(step).pnu == ALARM_WORD.code
+    earth_fault = ConditionReport(
+        kind="alarm", source="16-90", active=(Condition(code=14, text="Earth fault"),)
+    )
+    alarm = dataclasses.replace(reply(1, fault=True), conditions=earth_fault)
+    (completion,) = p.on_reply(step, alarm, 0.2).completions
+    assert completion.result.outcome is Outcome.UNCONFIRMED
+    assert completion.result.reason == "the drive is tripped: Earth fault"
+
+
+def test_stop_is_done_once_the_drive_stands_and_unconfirmed_while_it_still_runs() -> None:
+    p = planner(A, dataclasses.replace(B, confirm_s=3.0))
+    adopted(p, "b", running=True, output_pct=50.0)
+    p.submit("a", STOP, "a-stop")
+    p.submit("b", STOP, "b-stop")
+    ramping = {1: 40.0, 2: 40.0}  # both acknowledge while still running
+    ended: list[tuple[float, Completion]] = []
+    now = 0.0
+    while len(ended) < 2:
+        step = take(p, now)
+        assert step.slot is not None
+        pct = ramping[step.slot.address]
+        answer_ = reply(step.slot.address, running=pct > 0, output_pct=pct)
+        ended += [(now, c) for c in p.on_reply(step, answer_, now).completions]
+        ramping[1] = 0.0  # a stands after its acknowledgement; b keeps turning
+        ramping[2] = 30.0
+        now += 0.25
+    assert [(at, c.tickets, c.result.outcome) for at, c in ended] == [
+        (0.5, ("a-stop",), Outcome.DONE),  # acknowledged at 0, standing at its next poll
+        (3.25, ("b-stop",), Outcome.UNCONFIRMED),  # acknowledged at 0.25, deadline 3 s
+    ]
+    assert ended[1][1].result.reason == (
+        "still running at 30.0 % of nominal 3 s after the command (status word 0x0A07)"
+    )
+
+
+def test_a_stop_acknowledged_while_a_start_waits_supersedes_it() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    answer(p, 0.0)
+    p.submit("a", Command(action=Action.STOP, actor="ops"), "stop")
+    _, report = answer(p, 0.1)
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("start",), Outcome.SUPERSEDED),
+        (("stop",), Outcome.DONE),
+    ]
+    assert report.completions[0].result.reason == (
+        "superseded by stop by ops before its status showed the result"
+    )
+
+
+def test_a_drive_that_stops_answering_leaves_its_start_unconfirmed() -> None:
+    p = planner(A, offline_after=2)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    answer(p, 0.0)
+    assert results(p.on_failure(take(p, 0.1), 0.1, "no reply")) == []
+    (completion,) = p.on_failure(take(p, 0.2), 0.2, "no reply").completions
+    assert completion.result.outcome is Outcome.UNCONFIRMED
+    assert "stopped answering" in completion.result.reason
+
+
+def test_references_are_done_on_their_acknowledgement() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=10.0)
+    p.submit("a", set_reference(20.0), "ref")
+    _, report = answer(p, 0.0, running=True, output_pct=10.0)  # not at 20 % yet
+    assert results(report) == [Outcome.DONE]
 
 
 def test_parameter_read_ends_done_with_the_value_and_ak_7_ends_refused() -> None:
@@ -504,7 +645,8 @@ def test_stop_does_not_cancel_a_start_already_on_the_wire() -> None:
     ]
     step, report = answer(p, running=True, output_pct=50.0)
     assert telegram(step).pcd1 == STOP_WORD
-    assert results(report) == [Outcome.DONE]
+    assert results(report) == []  # acknowledged; the drive still runs
+    assert results(answer(p)[1]) == [Outcome.DONE]
 
 
 def test_at_shutdown_only_stops_and_the_command_on_the_wire_are_kept() -> None:
@@ -523,7 +665,7 @@ def test_at_shutdown_only_stops_and_the_command_on_the_wire_are_kept() -> None:
     assert results(p.on_reply(in_flight, reply(1, running=True, output_pct=50.0), 0.0)) == [
         Outcome.DONE
     ]
-    step, report = answer(p, running=True, output_pct=50.0)
+    step, report = answer(p)
     assert (step.slot.name if step.slot else None, telegram(step).pcd1) == ("a", STOP_WORD)
     assert results(report) == [Outcome.DONE]
     assert not p.has_commands
@@ -724,8 +866,13 @@ class PlannerMachine(RuleBasedStateMachine):
                 self.ends.setdefault(ticket, []).append(completion.result)
                 self.urgent.discard(ticket)
 
+    def _confirming(self) -> list[Pending]:
+        return [pending for slot in self.planner.slots for pending in slot.confirming]
+
     def _report(self, report: Report) -> None:
         self._ended(report.completions)
+        # Every exchange's report ends the confirmations whose deadline has passed.
+        assert all(pending.confirm_by > self.now for pending in self._confirming())
         for transition in report.transitions:
             name = transition.drive.name
             if transition.online:
@@ -783,7 +930,8 @@ class PlannerMachine(RuleBasedStateMachine):
     def send(self, elapsed: float) -> None:
         self.now += elapsed
         step = self.planner.next_step(self.now)
-        if self.urgent:
+        waiting = {ticket for pending in self._confirming() for ticket in pending.tickets}
+        if self.urgent - waiting:  # acknowledged stops wait for their status, not the line
             assert step is not None
             assert step.kind is StepKind.COMMAND
             assert step.pending is not None
