@@ -69,7 +69,15 @@ import dataclasses
 
 from fcmaster.bus import admission
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome, describe
-from fcmaster.bus.confirm import LOCAL, SHOWS_RUNNING, deadline, needs_confirmation, verdict
+from fcmaster.bus.confirm import (
+    LOCAL,
+    SHOWS_RUNNING,
+    confirm_time,
+    needs_confirmation,
+    note_ramp,
+    ramp_keys,
+    verdict,
+)
 from fcmaster.bus.intents import (
     adopted,
     apply,
@@ -146,6 +154,7 @@ class Planner:
         self.rotation = Rotation(plan, self.slots)
         self._in_flight: Pending | None = None  # the command whose step is on the wire
         self._confirming: list[Pending] = []  # acknowledged, waiting for the status to show it
+        self._ramp_keys = ramp_keys(codec)  # read from each bus-controlled drive once online
         self._peeked: Step | None = None  # the step peek chose, until it is committed
 
     # -- commands in -------------------------------------------------------------------
@@ -377,6 +386,7 @@ class Planner:
             for transition in report.transitions:  # several at once when the line fell silent
                 demoted = self._by_name[transition.drive.name]
                 demoted.urgent_reads.clear()
+                demoted.ramps_asked = False  # read again when it returns: it may be another
                 forget(demoted)  # adopt again when it returns
                 why = "the drive stopped answering before its status showed the result"
                 for waiting in list(demoted.confirming):
@@ -393,6 +403,13 @@ class Planner:
         learn(slot, reply)
         if slot.plan.control and slot.intent is None:
             slot.intent = adopted(slot)
+        keys = self._ramp_keys
+        if keys is not None and slot.plan.control:
+            if not slot.ramps_asked:
+                slot.ramps_asked = True
+                slot.urgent_reads.extend(keys)
+            if reply.value is not None:
+                note_ramp(slot, keys, reply)
         conditions = reply.conditions
         if conditions is not None and conditions.kind == "alarm":
             slot.alarms[conditions.source] = tuple(c.text for c in conditions.active)
@@ -473,7 +490,8 @@ class Planner:
                 return
             self._queue.remove(pending)
             pending.phase = Phase.CONFIRMING
-            pending.confirm_by = deadline(slot, now)
+            pending.confirm_s = confirm_time(slot, pending)
+            pending.confirm_by = now + pending.confirm_s
             slot.confirming.append(pending)
             self._confirming.append(pending)
             self._judge(slot, now, report)

@@ -60,6 +60,9 @@ class DriveSlot:
     alarms: dict[str, tuple[str, ...]] = field(default_factory=dict)  # source word → texts
     alarms_read: bool = False  # an alarm word was read since the fault bit last rose
     confirming: list[Pending] = field(default_factory=list)  # acknowledged, result not shown
+    ramp_up_s: float | None = None  # the drive's acceleration time, once read
+    ramp_down_s: float | None = None  # its deceleration time, once read
+    ramps_asked: bool = False  # the ramp reads are queued for this time online
 
     @property
     def name(self) -> str:
@@ -86,6 +89,7 @@ class Pending:
     access: tuple[Exchange, ...] = ()  # a read's or write's exchanges, once built
     learned: int = 0  # state-learning polls answered before a relative command
     confirm_by: float = 0.0  # CONFIRMING: the status must show the result by then
+    confirm_s: float = 0.0  # CONFIRMING: the time it was given
 
 
 @dataclass(slots=True, frozen=True)

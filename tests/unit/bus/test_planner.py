@@ -455,6 +455,8 @@ def test_start_ignored_by_the_drive_is_unconfirmed_at_its_deadline() -> None:
 def test_start_is_unconfirmed_with_the_alarm_text_when_the_drive_trips() -> None:
     p = planner(A)
     adopted(p)
+    while p.slot("a").urgent_reads:  # its ramp times, read once it is online
+        answer(p)
     p.submit("a", start(50.0), "start")
     answer(p, 0.0)
     assert results(answer(p, 0.1, fault=True)[1]) == []  # which alarm: read next
@@ -520,6 +522,31 @@ def test_a_drive_that_stops_answering_leaves_its_start_unconfirmed() -> None:
     (completion,) = p.on_failure(take(p, 0.2), 0.2, "no reply").completions
     assert completion.result.outcome is Outcome.UNCONFIRMED
     assert "stopped answering" in completion.result.reason
+
+
+def test_a_stop_waits_for_the_drives_own_deceleration_time_read_once_online() -> None:
+    p = planner(A, B)
+    adopted(p, "b", running=True, output_pct=50.0)
+    reads = []
+    for _ in range(4):  # each drive's acceleration and deceleration times, after adoption
+        step = take(p)
+        assert step.slot is not None
+        pnu = telegram(step).pnu
+        reads.append((step.slot.name, pnu))
+        raw = {341: 200, 342: 1500}[pnu]  # 2 s and 15 s
+        assert step.exchange.parameter is not None
+        value = ParameterValue(
+            parameter=step.exchange.parameter, index=0, raw=raw, value=raw / 100, unit="s"
+        )
+        running = step.slot.name == "b"
+        p.on_reply(step, reply(step.slot.address, running=running, output_pct=50.0 * running,
+                               value=value), 0.0)  # fmt: skip
+    assert reads == [("a", 341), ("b", 341), ("a", 342), ("b", 342)]
+    assert (p.slot("a").ramp_up_s, p.slot("a").ramp_down_s) == (2.0, 15.0)
+    p.submit("b", STOP, "stop")
+    answer(p, 1.0, running=True, output_pct=45.0)
+    (waiting,) = p.slot("b").confirming
+    assert waiting.confirm_s == 17.0  # 15 s from nominal, and a grace of 2 s
 
 
 def test_references_are_done_on_their_acknowledgement() -> None:
