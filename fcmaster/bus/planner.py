@@ -206,6 +206,7 @@ class Planner:
         """
         for slot in self.slots:
             forget(slot)
+            slot.ramps_asked = False  # read again once it answers: it may have been replaced
         self.rotation.line_down()
 
     @property
