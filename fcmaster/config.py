@@ -66,6 +66,8 @@ class DriveModel(_Model):
     max_frequency_hz: float | None = Field(default=None, gt=0)
     monitor: list[str] | None = None
     modbus_unit: int | None = Field(default=None, ge=1, le=247)  # None: the bus address
+    # seconds the status may take to show a start's or stop's result (None: a default)
+    confirm_s: float | None = Field(default=None, gt=0, le=600)
 
 
 class BusModel(_Model):
@@ -468,6 +470,7 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                     nominal_frequency_hz=drive.nominal_frequency_hz,
                     min_frequency_hz=drive.min_frequency_hz,
                     max_frequency_hz=max_hz,
+                    confirm_s=drive.confirm_s,
                 )
             )
         if bus.protocol != "danfoss-fc" and "address_format" in bus.model_fields_set:

@@ -110,3 +110,11 @@ class CommandTimedOut(CommandError):
 
 class CommandCancelled(CommandError):
     """The line shut down or was lost before the command was carried out."""
+
+
+class CommandUnconfirmed(CommandError):
+    """The drive acknowledged the command but its status never showed the result in time."""
+
+
+class CommandSuperseded(CommandError):
+    """A newer command for the same drive replaced this one before it reached the wire."""

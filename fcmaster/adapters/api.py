@@ -75,8 +75,10 @@ OUTCOME_STATUS: Final = {
     Outcome.REFUSED: 409,  # the drive said no (its error code in "error"): a state conflict
     Outcome.NOT_ALLOWED: 403,  # monitor-only drive, or beyond the drive's configured limits
     Outcome.INVALID: 422,  # malformed, or a parameter the protocol cannot address
+    Outcome.SUPERSEDED: 409,  # a newer command replaced it before it reached the wire
     Outcome.TIMEOUT: 504,  # the drive did not answer after the line's retries
-    Outcome.CANCELLED: 503,  # shutdown, line down or lost, or superseded by a stop
+    Outcome.UNCONFIRMED: 504,  # acknowledged, but the status did not show the result in time
+    Outcome.CANCELLED: 503,  # shutdown, line down or lost
 }
 
 DESCRIPTION: Final = """\
@@ -94,10 +96,12 @@ also takes the token as `?token=`, since browsers cannot set its headers.
 |---|---|---|
 | `done` | 200 | carried out (`value`, `unit`, `raw` for reads) |
 | `refused` | 409 | the drive said no; `error` has its code and text |
+| `superseded` | 409 | a newer command replaced it before it reached the wire (`reason` names it) |
 | `not_allowed` | 403 | monitor-only drive, or beyond its configured limits (`reason` names them) |
 | `invalid` | 422 | malformed, or a parameter the protocol cannot address |
 | `timeout` | 504 | no answer from the drive after the line's retries |
-| `cancelled` | 503 | the daemon is shutting down, the line is down, or a stop superseded it |
+| `unconfirmed` | 504 | acknowledged, but the status did not show the result (`reason` says why) |
+| `cancelled` | 503 | the daemon is shutting down or the line is down |
 
 A 401 means no or an unknown token, a 403 without `outcome` a role too low for the request,
 a 404 an unknown drive, a 400 a body that is not JSON text, a 413 one over 64 KiB. A

@@ -13,7 +13,9 @@ from typing import Any
 from fcmaster.errors import (
     CommandCancelled,
     CommandError,
+    CommandSuperseded,
     CommandTimedOut,
+    CommandUnconfirmed,
     ControlNotAllowed,
     DriveRejected,
     UsageError,
@@ -58,7 +60,9 @@ class Outcome(enum.StrEnum):
     TIMEOUT = "timeout"
     NOT_ALLOWED = "not_allowed"  # monitor-only drive, or beyond the configured limits
     INVALID = "invalid"  # malformed
-    CANCELLED = "cancelled"  # shutdown, line lost, or superseded by a stop
+    CANCELLED = "cancelled"  # shutdown, line lost
+    UNCONFIRMED = "unconfirmed"  # acknowledged, but the status never showed the result in time
+    SUPERSEDED = "superseded"  # a newer command replaced it before it reached the wire
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -102,6 +106,10 @@ class CommandResult:
                 raise UsageError(self.reason)
             case Outcome.CANCELLED:
                 raise CommandCancelled(self.reason)
+            case Outcome.UNCONFIRMED:
+                raise CommandUnconfirmed(self.reason)
+            case Outcome.SUPERSEDED:
+                raise CommandSuperseded(self.reason)
         raise CommandError(self.reason)  # pragma: no cover - every outcome is matched above
 
 
@@ -116,3 +124,19 @@ class Command:
     value: float | str | None = None  # write
     persist: bool = False  # write to non-volatile memory too
     actor: str = ""  # who asked (token name, "cli", "mqtt:client-id"), for the log
+
+
+def describe(command: Command) -> str:
+    """The command in a few words, for a reason that names it ("set_reference 40 % by ops")."""
+    words = [command.action.value]
+    if command.reference_pct is not None:
+        words.append(f"{command.reference_pct:g} %")
+    if command.parameter is not None:
+        words.append(
+            command.parameter if command.index == 0 else f"{command.parameter}[{command.index}]"
+        )
+    if command.value is not None:
+        words.append(f"= {command.value}")
+    if command.actor:
+        words.append(f"by {command.actor}")
+    return " ".join(words)

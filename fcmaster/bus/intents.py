@@ -62,6 +62,17 @@ def forget(slot: DriveSlot) -> None:
         slot.intent = None
 
 
+def unknown(slot: DriveSlot) -> None:
+    """A command may or may not have been applied: command nothing until adopted again.
+
+    Neither the previous intent (it would undo what the drive may be doing: a pulse) nor
+    the timed-out one (it may never have been meant to hold) is repeated; the drive's next
+    good status is adopted, as at start-up.
+    """
+    slot.intent = None
+    slot.running = slot.output_pct = None
+
+
 def restarted(slot: DriveSlot, until: float) -> None:
     """The drive restarts and hears nothing until ``until``; its output is off."""
     slot.deaf_until = until

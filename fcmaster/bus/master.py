@@ -430,6 +430,7 @@ class BusMaster:
                 actor=command.actor or "-",
                 drive=completion.drive,
                 command=command.action.value,
+                **self._values(completion.drive, command, result),
                 outcome=result.outcome.value,
                 reason=result.reason or None,
             )
@@ -439,6 +440,25 @@ class BusMaster:
             self._notify(
                 self._observer.command_completed, self.plan.name, completion.drive, command, result
             )
+
+    def _values(self, drive: str, command: Command, result: CommandResult) -> dict[str, object]:
+        """The values a command carried (and a read returned), for its audit line."""
+        values: dict[str, object] = {}
+        if command.reference_pct is not None:
+            values["reference_pct"] = command.reference_pct
+            slot = self.planner.find(drive)
+            if slot is not None:
+                nominal = slot.plan.nominal_frequency_hz
+                values["frequency_hz"] = round(command.reference_pct * nominal / 100, 6)
+        if command.parameter is not None:
+            values["parameter"] = command.parameter
+            if command.index:
+                values["index"] = command.index
+        if command.value is not None:
+            values["value"] = command.value
+        if result.value is not None:
+            values["read_value"] = result.value.value
+        return values
 
     def _flush_deferred(self) -> None:
         if self._deferred:

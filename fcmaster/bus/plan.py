@@ -30,6 +30,8 @@ class DrivePlan:
     nominal_frequency_hz: float = 50.0  # what 100 % reference means
     min_frequency_hz: float = 0.0
     max_frequency_hz: float = 50.0
+    # how long the status may take to show a start's or stop's result (None: a default)
+    confirm_s: float | None = None
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)

@@ -30,8 +30,11 @@ good reply is *adopted*: a running drive is commanded to keep running at its pre
 and direction, a stopped one to stay stopped. A drive that returns from being demoted is
 adopted again unless the last command was a stop, and so is every drive once the line has
 been down (:meth:`Planner.on_line_down`), so a drive that comes back is never started by
-the master on its own. A trip (status fault rising) turns the intent into a stop,
-so a later reset does not restart the motor; a new start is needed.
+the master on its own. A motion command (start, jog, reference, direction, reset) that
+timed out may or may not have been applied, so neither it nor the previous intent is
+repeated: the drive is adopted again from its next good status. Reverting would pulse the
+motor (a start applied, its replies lost, then a stop). A trip (status fault rising) turns
+the intent into a stop, so a later reset does not restart the motor; a new start is needed.
 
 A command may take several exchanges (a Mitsubishi run is a frequency write and a run
 command; its parameter access selects the parameter page first). They go one after the
@@ -47,8 +50,8 @@ reset never restarts a motor.
 
 Every command ends exactly once, reported as a :class:`Completion`: the master resolves
 the caller's future from it. A stop supersedes motion commands of the same drive that are
-still queued (they end ``cancelled``); a newer reference coalesces into a queued one (both
-end with the newer one's result). Neither touches a command whose step is in flight (the
+still queued (they end ``superseded``); a newer reference takes the place of a queued one
+(which ends ``superseded``, naming it). Neither touches a command whose step is in flight (the
 last step :meth:`Planner.next_step` handed out and not yet reported back): the drive may
 already be acting on it, and its reply must still find it at the head of its queue.
 
@@ -65,7 +68,16 @@ from __future__ import annotations
 import dataclasses
 
 from fcmaster.bus import admission
-from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome, describe
+from fcmaster.bus.confirm import (
+    LOCAL,
+    SHOWS_RUNNING,
+    confirm_time,
+    needs_confirmation,
+    note_ramp,
+    ramp_keys,
+    verdict,
+)
 from fcmaster.bus.intents import (
     adopted,
     apply,
@@ -76,6 +88,7 @@ from fcmaster.bus.intents import (
     needs_learning,
     restarted,
     stopping_only,
+    unknown,
     without_reset,
 )
 from fcmaster.bus.plan import LinePlan, OnStart
@@ -140,6 +153,8 @@ class Planner:
                 self._queue.add(Pending(stop, slot, []), None)
         self.rotation = Rotation(plan, self.slots)
         self._in_flight: Pending | None = None  # the command whose step is on the wire
+        self._confirming: list[Pending] = []  # acknowledged, waiting for the status to show it
+        self._ramp_keys = ramp_keys(codec)  # read from each bus-controlled drive once online
         self._peeked: Step | None = None  # the step peek chose, until it is committed
 
     # -- commands in -------------------------------------------------------------------
@@ -147,6 +162,10 @@ class Planner:
     def slot(self, name: str) -> DriveSlot:
         """The drive called ``name``; KeyError if the line has none."""
         return self._by_name[name]
+
+    def find(self, name: str) -> DriveSlot | None:
+        """The drive called ``name``; None if the line has none (or "*", the line)."""
+        return self._by_name.get(name)
 
     def submit(self, name: str | None, command: Command, ticket: object) -> list[Completion]:
         """Queue ``command`` for drive ``name`` (None: broadcast to the line).
@@ -163,6 +182,9 @@ class Planner:
     def cancel_all(self, reason: str) -> list[Completion]:
         """End every queued command as cancelled (shutdown, line lost)."""
         ended = self._queue.cancel_all(reason)
+        for pending in list(self._confirming):
+            why = f"{reason} before the drive's status showed the result"
+            ended.append(self._confirmed(pending, result_of(Outcome.UNCONFIRMED, why)))
         self._in_flight = None
         self._peeked = None
         return ended
@@ -184,6 +206,7 @@ class Planner:
         """
         for slot in self.slots:
             forget(slot)
+            slot.ramps_asked = False  # read again once it answers: it may have been replaced
         self.rotation.line_down()
 
     @property
@@ -195,6 +218,11 @@ class Planner:
     def has_commands(self) -> bool:
         """Whether commands are waiting for the line."""
         return bool(self._queue)
+
+    @property
+    def confirming(self) -> int:
+        """How many acknowledged commands wait for their drive's status to show the result."""
+        return len(self._confirming)
 
     # -- what next -----------------------------------------------------------------------
 
@@ -307,7 +335,9 @@ class Planner:
         report = Report()
         self._in_flight = None
         if step.pending is not None:
-            self._advance(step.pending, report, None)
+            self._advance(step.pending, report, None, now)
+        if self._confirming:
+            self._expire(now, report)
         deaf_s = step.exchange.deaf_s
         if deaf_s > 0:
             for target in self._targets(step.slot):
@@ -321,10 +351,12 @@ class Planner:
         slot = step.slot
         tripped = slot is not None and self._heard(slot, step, reply, now, report)
         if step.pending is not None:
-            self._advance(step.pending, report, reply)
+            self._advance(step.pending, report, reply, now)
         if tripped and slot is not None and slot.intent is not None:
             # After the command's own intent: a trip in the reply to a start still stops.
             slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP)
+        if self._confirming:
+            self._expire(now, report)
         return report
 
     def on_failure(self, step: Step, now: float, reason: str) -> Report:
@@ -339,7 +371,14 @@ class Planner:
                 pending.part = 0  # again from the start: what a first exchange selected may be gone
             if pending.attempts <= self.plan.retries:
                 return report  # stays at the head of its queue: retried next
+            sent = pending.phase is Phase.SENDING
             self._finish(pending, report, result_of(Outcome.TIMEOUT, reason))
+            action = pending.command.action
+            if sent and action.is_control and not action.is_urgent:
+                # The drive may or may not have applied it: adopt it again from its next
+                # good status. A stop that timed out is kept (it holds from being sent).
+                for target in self._targets(slot):
+                    unknown(target)
         if slot is not None:
             kind = None if step.kind is StepKind.COMMAND else step.kind
             # After the deadline a late reply may still be arriving: the line is not free.
@@ -348,7 +387,14 @@ class Planner:
             for transition in report.transitions:  # several at once when the line fell silent
                 demoted = self._by_name[transition.drive.name]
                 demoted.urgent_reads.clear()
+                demoted.ramps_asked = False  # read again when it returns: it may be another
                 forget(demoted)  # adopt again when it returns
+                why = "the drive stopped answering before its status showed the result"
+                for waiting in list(demoted.confirming):
+                    done = self._confirmed(waiting, result_of(Outcome.UNCONFIRMED, why))
+                    report.completions.append(done)
+        if self._confirming:
+            self._expire(now, report)
         return report
 
     def _heard(self, slot: DriveSlot, step: Step, reply: Reply, now: float, report: Report) -> bool:
@@ -358,13 +404,31 @@ class Planner:
         learn(slot, reply)
         if slot.plan.control and slot.intent is None:
             slot.intent = adopted(slot)
+        keys = self._ramp_keys
+        if keys is not None and slot.plan.control:
+            if not slot.ramps_asked:
+                slot.ramps_asked = True
+                slot.urgent_reads.extend(keys)
+            if reply.value is not None:
+                note_ramp(slot, keys, reply)
+        conditions = reply.conditions
+        if conditions is not None and conditions.kind == "alarm":
+            slot.alarms[conditions.source] = tuple(c.text for c in conditions.active)
+            slot.alarms_read = True
         status = reply.status
         if status is None:
+            if slot.confirming and conditions is not None:
+                self._judge(slot, now, report)
             return False
         alarms_changed = status.fault != slot.fault
         warnings_changed = status.warning != slot.warning
         tripped = status.fault and not slot.fault
         slot.fault, slot.warning = status.fault, status.warning
+        slot.local, slot.status_word = not status.accepts_bus_control, status.word
+        if tripped:
+            slot.alarms_read = False  # which alarm it is comes with the next read of its word
+        if slot.confirming:
+            self._judge(slot, now, report)
         if alarms_changed or warnings_changed:
             for key in self.codec.condition_parameters(
                 alarms=alarms_changed, warnings=warnings_changed
@@ -373,7 +437,7 @@ class Planner:
                     slot.urgent_reads.append(key)
         return tripped
 
-    def _advance(self, pending: Pending, report: Report, reply: Reply | None) -> None:
+    def _advance(self, pending: Pending, report: Report, reply: Reply | None, now: float) -> None:
         command = pending.command
         if reply is not None and reply.error is not None:
             self._finish(
@@ -416,18 +480,22 @@ class Planner:
                 return
             for target in self._targets(slot):
                 target.intent = without_reset(pending.intent)
+                self._replace_confirming(target, command, report)
+            confirm = needs_confirmation(pending)
             if reply is not None and reply.status and not reply.status.accepts_bus_control:
-                self._finish(
-                    pending,
-                    report,
-                    result_of(
-                        Outcome.REFUSED,
-                        "the drive is in local operation and ignores "
-                        "bus commands (status word: no bus control)",
-                    ),
-                )
+                outcome = Outcome.UNCONFIRMED if confirm else Outcome.REFUSED
+                self._finish(pending, report, result_of(outcome, LOCAL))
                 return
-            self._finish(pending, report, result_of(Outcome.DONE, ""))
+            if not confirm or slot is None:
+                self._finish(pending, report, result_of(Outcome.DONE, ""))
+                return
+            self._queue.remove(pending)
+            pending.phase = Phase.CONFIRMING
+            pending.confirm_s = confirm_time(slot, pending)
+            pending.confirm_by = now + pending.confirm_s
+            slot.confirming.append(pending)
+            self._confirming.append(pending)
+            self._judge(slot, now, report)
             return
         pending.part += 1
         if pending.part < len(pending.access):
@@ -436,6 +504,41 @@ class Planner:
             return
         value = None if reply is None else reply.value
         self._finish(pending, report, CommandResult(outcome=Outcome.DONE, value=value))
+
+    def _judge(self, slot: DriveSlot, now: float, report: Report) -> None:
+        """End the drive's commands whose result its status now shows, or cannot show."""
+        for pending in list(slot.confirming):
+            result = verdict(slot, pending, now)
+            if result is not None:
+                report.completions.append(self._confirmed(pending, result))
+
+    def _expire(self, now: float, report: Report) -> None:
+        """End the commands whose confirmation deadline has passed (checked per exchange)."""
+        for pending in list(self._confirming):
+            if pending.confirm_by <= now and pending.slot is not None:
+                result = verdict(pending.slot, pending, now)
+                if result is not None:
+                    report.completions.append(self._confirmed(pending, result))
+
+    def _replace_confirming(self, slot: DriveSlot, command: Command, report: Report) -> None:
+        """A newer motion command asks the opposite of what the drive's waiting ones do."""
+        wanted = SHOWS_RUNNING.get(command.action)
+        if wanted is None:
+            return  # references, directions and resets leave a start or stop to show itself
+        for pending in list(slot.confirming):
+            if SHOWS_RUNNING[pending.command.action] is not wanted:
+                why = f"superseded by {describe(command)} before its status showed the result"
+                report.completions.append(
+                    self._confirmed(pending, result_of(Outcome.SUPERSEDED, why))
+                )
+
+    def _confirmed(self, pending: Pending, result: CommandResult) -> Completion:
+        """A command waiting for its confirmation ends with ``result``."""
+        assert pending.slot is not None
+        pending.slot.confirming.remove(pending)
+        self._confirming.remove(pending)
+        pending.phase = Phase.ENDED
+        return completion_of(pending, result)
 
     def _finish(self, pending: Pending, report: Report, result: CommandResult) -> None:
         # Usually the head of its queue; a command behind one for a restarting drive may

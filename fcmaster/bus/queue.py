@@ -2,10 +2,12 @@
 
 Urgent commands (stop, coast, quick stop) go before all others, oldest first; the rest in
 arrival order. A command for a restarting drive waits without holding up the others. A
-stop supersedes the queued motion commands of its drive that have sent nothing of their
-own (they end ``cancelled``); a newer reference is merged into a queued one that has not
-gone out (both end with the newer one's result). Neither touches the command in flight:
-the drive may already be acting on it, and its reply must still find it queued.
+stop supersedes the queued motion commands of its drive (they end ``superseded``, naming
+the stop), including one whose attempt got no answer and waits for its retry: a retried
+start must never follow a stop (start, stop, start on the wire). A newer reference takes
+the place of a queued one that has not gone out (the older ends ``superseded``, naming the
+newer). Neither touches the command in flight: the drive may already be acting on it, and
+its reply must still find it queued.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Iterable
 
-from fcmaster.bus.commands import Action, Command, Outcome
+from fcmaster.bus.commands import Action, Command, Outcome, describe
 from fcmaster.bus.steps import Completion, DriveSlot, Pending, Phase, completion_of, result_of
 
 MOTION_ACTIONS = frozenset(
@@ -40,8 +42,11 @@ class CommandQueue:
         if command.action.is_urgent:
             self._urgent.append(pending)
             return self._supersede(pending.slot, command, in_flight)
-        if command.action is not Action.SET_REFERENCE or not self._coalesce(pending, in_flight):
-            self._normal.append(pending)
+        if command.action is Action.SET_REFERENCE:
+            replaced = self._coalesce(pending, in_flight)
+            if replaced is not None:
+                return [replaced]
+        self._normal.append(pending)
         return []
 
     def next_ready(
@@ -88,30 +93,35 @@ class CommandQueue:
     ) -> list[Completion]:
         """A stop makes queued motion commands for the same drive moot.
 
-        A command that has sent anything of its own, or failed an attempt, is left to finish.
+        Only the command on the wire is left to finish. One whose attempt got no answer
+        (the drive may have applied it) ends too rather than being retried after the stop;
+        its reason says it may have been seen.
         """
         ended: list[Completion] = []
         keep: deque[Pending] = deque()
         for pending in self._normal:
             if (
                 pending.command.action in MOTION_ACTIONS
-                and pending.phase in UNSENT
-                and pending.attempts == 0
                 and pending is not in_flight
                 and (slot is None or pending.slot is slot or pending.slot is None)
             ):
                 pending.phase = Phase.ENDED
-                result = result_of(Outcome.CANCELLED, f"superseded by {command.action}")
-                ended.append(completion_of(pending, result))
+                reason = f"superseded by {describe(command)}"
+                if pending.attempts or pending.part:
+                    reason += " (part of it went out unanswered: the drive may have seen it)"
+                ended.append(completion_of(pending, result_of(Outcome.SUPERSEDED, reason)))
             else:
                 keep.append(pending)
         self._normal = keep
         return ended
 
-    def _coalesce(self, pending: Pending, in_flight: Pending | None) -> bool:
-        # Only into the newest queued command that sets this drive's reference, so that a
-        # start with a reference queued in between cannot end up overriding the newest one;
-        # and only while its telegram is not built yet (not on the wire, not half sent).
+    def _coalesce(self, pending: Pending, in_flight: Pending | None) -> Completion | None:
+        """Put ``pending`` in the place of a queued reference; that one ends superseded.
+
+        Only the newest queued command that sets this drive's reference, so that a start
+        with a reference queued in between cannot end up overriding the newest one; and only
+        while its telegram is not built yet (not on the wire, not half sent).
+        """
         for queued in reversed(self._normal):
             if queued.slot is not pending.slot or queued.command.reference_pct is None:
                 continue
@@ -121,8 +131,10 @@ class CommandQueue:
                 and queued.attempts == 0
                 and queued is not in_flight
             ):
+                result = result_of(Outcome.SUPERSEDED, f"superseded by {describe(pending.command)}")
+                replaced = completion_of(queued, result)
                 queued.command = pending.command
-                queued.tickets.extend(pending.tickets)
-                return True
-            return False
-        return False
+                queued.tickets = pending.tickets
+                return replaced
+            return None
+        return None

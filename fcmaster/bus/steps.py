@@ -32,6 +32,7 @@ class Phase(enum.Enum):
     QUEUED = "queued"  # waiting; nothing of it has gone out, so it may be superseded
     LEARNING = "learning"  # polling the drive's state before changing part of it
     SENDING = "sending"  # its exchanges are going out (some may have gone)
+    CONFIRMING = "confirming"  # acknowledged; waiting for the status to show its result
     ENDED = "ended"  # its result is reported
 
 
@@ -54,6 +55,14 @@ class DriveSlot:
     reverse: bool = False
     output_pct: float | None = None  # the last output reported, in % of nominal
     deaf_until: float = 0.0  # restarting (after an inverter reset): nothing goes to it before
+    local: bool = False  # the last status said local operation: bus commands are ignored
+    status_word: int | None = None  # the last status word, raw
+    alarms: dict[str, tuple[str, ...]] = field(default_factory=dict)  # source word → texts
+    alarms_read: bool = False  # an alarm word was read since the fault bit last rose
+    confirming: list[Pending] = field(default_factory=list)  # acknowledged, result not shown
+    ramp_up_s: float | None = None  # the drive's acceleration time, once read
+    ramp_down_s: float | None = None  # its deceleration time, once read
+    ramps_asked: bool = False  # the ramp reads are queued for this time online
 
     @property
     def name(self) -> str:
@@ -79,6 +88,8 @@ class Pending:
     intent: ControlIntent | None = None  # the intent this command sends, once built
     access: tuple[Exchange, ...] = ()  # a read's or write's exchanges, once built
     learned: int = 0  # state-learning polls answered before a relative command
+    confirm_by: float = 0.0  # CONFIRMING: the status must show the result by then
+    confirm_s: float = 0.0  # CONFIRMING: the time it was given
 
 
 @dataclass(slots=True, frozen=True)

@@ -18,7 +18,7 @@ from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.link import Link
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.planner import Planner, StepKind
+from fcmaster.bus.planner import Planner
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
 from fcmaster.errors import BusError, CommandError, UsageError
@@ -343,9 +343,9 @@ async def _carry_out(session: _Session, planner: Planner, name: str, command: Co
             return completion.result
     while True:
         step = planner.next_step(session.clock.now())
-        # The command heads the queue until it completes, so every step serves it.
+        # The command heads the queue until it is acknowledged; a start or stop then waits
+        # for the drive's status to show its result, which the polls bring.
         assert step is not None
-        assert step.kind is StepKind.COMMAND
         reply = await session.link.transact(step.exchange)
         now = session.clock.now()
         if not step.exchange.expects_reply:

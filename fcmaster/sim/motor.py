@@ -116,6 +116,9 @@ class Motor:
         self.running_s = 0.0
         self.energy_kwh = 0.0
         self.zero_at: float | None = now  # when the output last reached 0 Hz
+        # An external interlock (run enable missing, safe torque off): the drive hears and
+        # acknowledges run commands, but the output stays off.
+        self.interlocked = False
         self._t = now
 
     @property
@@ -126,6 +129,8 @@ class Motor:
     def set_command(self, command: MotorCommand, now: float) -> None:
         """Integrate up to ``now``, then follow ``command``."""
         self.advance(now)
+        if self.interlocked and command.mode in (Mode.RUN, Mode.HOLD):
+            command = MotorCommand(mode=Mode.OFF)
         self.command = command
         if command.mode in (Mode.RUN, Mode.HOLD):
             self.output_on = True

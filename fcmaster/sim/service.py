@@ -16,6 +16,7 @@ The bus's optional ``simulation:`` section says what the drives do::
       adapter_latency_ms: 16               # replies held as by a USB adapter's latency timer
       drives:                              # by address; overrides the keys above
         3: {load: 0.9, faults: "silent_at=60-70", local: false,
+            interlocked: false,                      # true: acknowledges a start, never turns
             response_delay_ms: 20, parameters: {"3-41": 5.0},
             running_hz: 35,                          # found running, as a former master left it
             warning: {number: 59, every_s: 60, for_s: 15}}   # a warning that comes and goes
@@ -43,7 +44,16 @@ _LINE_KEYS: Final = frozenset(
     {"seed", "faults", "response_delay_ms", "load", "drives", "adapter_latency_ms"}
 )
 _DRIVE_KEYS: Final = frozenset(
-    {"faults", "response_delay_ms", "load", "local", "parameters", "running_hz", "warning"}
+    {
+        "faults",
+        "response_delay_ms",
+        "load",
+        "local",
+        "interlocked",
+        "parameters",
+        "running_hz",
+        "warning",
+    }
 )
 _RPM_PER_HZ: Final = 29.0  # a four-pole motor with 3 % slip: 1450 rpm at 50 Hz
 
@@ -128,6 +138,7 @@ def _drive(
             },
             faults=_faults(own.get("faults"), f"{here}.faults") if "faults" in own else None,
             local=bool(own.get("local", False)),
+            interlocked=bool(own.get("interlocked", False)),
             running_hz=float(own["running_hz"]) if "running_hz" in own else None,
             warning_cycle=_warning_cycle(own.get("warning"), f"{here}.warning"),
         )

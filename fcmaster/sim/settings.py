@@ -32,6 +32,7 @@ class DriveSettings:
     parameters: Mapping[str, float] = field(default_factory=dict)  # manual notation → value
     faults: FaultPlan | None = None  # what goes wrong with this drive's replies
     local: bool = False  # in local (hand) operation: ignores bus commands
+    interlocked: bool = False  # acknowledges a start but does not turn (no run enable)
     running_hz: float | None = None  # already running at power-up, as a former master left it
     warning_cycle: tuple[int, float, float] | None = None  # (warning number, every_s, for_s)
 
@@ -45,9 +46,11 @@ class DriveSettings:
 
     def motor(self, started: float, rating: MotorRating | None = None) -> Motor:
         """The drive's motor and load (``rating`` where the vendor derives its own)."""
-        return Motor(
+        motor = Motor(
             rating or self.rating, started, load=self.load, load_exponent=self.load_exponent
         )
+        motor.interlocked = self.interlocked
+        return motor
 
     def warning_showing(self, since_power_up_s: float) -> bool:
         """Whether the recurring warning (``warning_cycle``) shows at this age (False: none)."""

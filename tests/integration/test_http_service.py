@@ -124,3 +124,61 @@ async def test_buses_and_metrics_come_from_the_running_lines() -> None:
         assert 'fcmaster_bus_up{bus="line2"} 1' in text
         assert 'fcmaster_drive_online{bus="line1",drive="pump-1"} 1' in text
         assert 'fcmaster_bus_transaction_latency_seconds_bucket{bus="line1",le="+Inf"}' in text
+
+
+CONFIRMING_CONFIG = """
+buses:
+  - name: line1
+    port: sim://line1
+    baudrate: 115200
+    simulation:
+      drives:
+        2: {{interlocked: true}}
+        3: {{local: true}}
+    drives:
+      - {{name: runs, address: 1, control: bus}}
+      - {{name: interlocked, address: 2, control: bus, confirm_s: 1.5}}
+      - {{name: local, address: 3, control: bus}}
+http:
+  listen: 127.0.0.1:{port}
+  tokens:
+    - {{name: ops, role: operator, token: "{operator}"}}
+"""
+
+
+async def test_a_start_is_done_only_where_the_simulated_motor_turns() -> None:
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    text = CONFIRMING_CONFIG.format(port=port, operator=OPERATOR["Authorization"].split()[1])
+    async with (
+        running(text, url),
+        httpx.AsyncClient(base_url=url, timeout=10) as client,
+    ):
+        answers = {}
+        with capture_logs() as logs:
+            for name in ("runs", "interlocked", "local"):
+                answer = await client.post(
+                    f"/api/v1/drives/{name}/commands",
+                    json={"action": "start", "frequency_hz": 20},
+                    headers=OPERATOR,
+                )
+                answers[name] = (answer.status_code, answer.json()["outcome"])
+                if name == "interlocked":
+                    assert answer.json()["reason"].startswith("not running after 1.5 s")
+                if name == "local":
+                    assert "local operation" in answer.json()["reason"]
+    assert answers == {
+        "runs": (200, "done"),
+        "interlocked": (504, "unconfirmed"),
+        "local": (504, "unconfirmed"),
+    }
+    audit = [
+        (e["drive"], e["frequency_hz"], e["reference_pct"], e["outcome"])
+        for e in logs
+        if e["event"] == "command.completed"
+    ]
+    assert audit == [
+        ("runs", 20.0, 40.0, "done"),
+        ("interlocked", 20.0, 40.0, "unconfirmed"),
+        ("local", 20.0, 40.0, "unconfirmed"),
+    ]

@@ -41,6 +41,7 @@ def default_parameters() -> dict[int, int]:
         1690: 0,
         1692: 0,
         341: 500,
+        342: 500,
         1500: 12,
     }
 

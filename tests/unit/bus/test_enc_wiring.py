@@ -12,7 +12,7 @@ from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.bus.planner import Planner, StepKind
 from fcmaster.config import parse
 from fcmaster.errors import ConfigError
-from fcmaster.protocol.codec import Reply
+from fcmaster.protocol.codec import DriveStatus, Reply
 from fcmaster.protocol.drive import ControlIntent, Motion
 from fcmaster.protocol.enc import EncCodec, NumberEncoding, decode_request
 
@@ -145,7 +145,10 @@ def test_on_start_stop_sends_the_stop_on_its_own_before_any_poll() -> None:
     assert step.kind is StepKind.COMMAND
     assert step.exchange.request == b"~010C0007019B\r"  # 12/0007 stop, the manual's example
     report = planner.on_reply(step, Reply(address=1), 0.01)
-    assert [c.result.outcome for c in report.completions] == [Outcome.DONE]
+    assert report.completions == []  # acknowledged; done once a status shows it stopped
     after = planner.next_step(0.02)
     assert after is not None
     assert after.kind is StepKind.POLL
+    stopped = DriveStatus(word=0, running=False, fault=False, warning=False, at_reference=False)
+    report = planner.on_reply(after, Reply(address=1, status=stopped), 0.03)
+    assert [c.result.outcome for c in report.completions] == [Outcome.DONE]

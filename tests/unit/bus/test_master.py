@@ -11,6 +11,7 @@ import itertools
 import random
 
 import pytest
+import structlog.testing
 
 from fcmaster.bus.commands import Action, Command, Outcome
 from fcmaster.bus.master import BACKOFF_FIRST_S, BACKOFF_MAX_S
@@ -217,11 +218,26 @@ async def test_queued_references_coalesce_and_the_newest_wins() -> None:
         await b.clock.run_until(T0 + 0.2)
         await b.mid_transaction()
         drive = b.master.drive("a")
-        tasks = [b.submit(drive.set_reference(reference_pct=pct)) for pct in (20.0, 30.0, 40.0)]
-        for task in tasks:
-            await b.complete(task)
-        await b.clock.run_for(0.2)
-    assert [t.result().outcome for t in tasks] == [Outcome.DONE] * 3
+        with structlog.testing.capture_logs() as logs:
+            tasks = [b.submit(drive.set_reference(reference_pct=pct)) for pct in (20.0, 30.0, 40.0)]
+            for task in tasks:
+                await b.complete(task)
+            await b.clock.run_for(0.2)
+    assert [t.result().outcome for t in tasks] == [
+        Outcome.SUPERSEDED,
+        Outcome.SUPERSEDED,
+        Outcome.DONE,
+    ]
+    assert [t.result().reason for t in tasks[:2]] == [
+        "superseded by set_reference 30 %",
+        "superseded by set_reference 40 %",
+    ]
+    audit = [
+        (e["reference_pct"], e["frequency_hz"], e["outcome"])
+        for e in logs
+        if e["event"] == "command.completed"
+    ]
+    assert audit == [(20.0, 10.0, "superseded"), (30.0, 15.0, "superseded"), (40.0, 20.0, "done")]
     references = {t.pcd2 for _, t in b.requests(1)}
     assert encode_reference(40.0) in references
     assert not {encode_reference(20.0), encode_reference(30.0)} & references
@@ -243,7 +259,7 @@ async def test_stop_cancels_queued_start_jog_and_reference_of_that_drive_only() 
         await b.complete(other)
     for task in (start, jog, reference):
         result = task.result()
-        assert result.outcome is Outcome.CANCELLED
+        assert result.outcome is Outcome.SUPERSEDED
         assert result.reason == "superseded by stop"
     assert [t.result().outcome for t in (read, other, stop)] == [Outcome.DONE] * 3
     assert not [w for w in b.words(1) if w & ControlWord.START]
@@ -421,13 +437,19 @@ async def test_reset_is_a_one_telegram_pulse_of_bit_7() -> None:
     assert not b.drives[1].tripped
 
 
-async def test_drive_in_local_operation_refuses_bus_commands() -> None:
+async def test_drive_in_local_operation_leaves_a_start_unconfirmed_and_refuses_a_reference() -> (
+    None
+):
     b = bench(A, fc=[FcDrive(1, local=True)])
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
-        result = await b.complete(b.submit(b.master.drive("a").start(reference_pct=10.0)))
-    assert result.outcome is Outcome.REFUSED
-    assert "local operation" in result.reason
+        drive = b.master.drive("a")
+        started = await b.complete(b.submit(drive.start(reference_pct=10.0)))
+        referred = await b.complete(b.submit(drive.set_reference(reference_pct=20.0)))
+    assert started.outcome is Outcome.UNCONFIRMED
+    assert "local operation" in started.reason
+    assert referred.outcome is Outcome.REFUSED
+    assert "local operation" in referred.reason
     assert not b.drives[1].running
 
 
@@ -790,7 +812,12 @@ async def test_every_command_gets_exactly_one_outcome_also_at_shutdown() -> None
         await task
     outcomes = [task.result().outcome for task in tasks]
     assert Outcome.CANCELLED in outcomes
-    assert {o for o in outcomes} <= {Outcome.DONE, Outcome.TIMEOUT, Outcome.CANCELLED}
+    assert {o for o in outcomes} <= {
+        Outcome.DONE,
+        Outcome.TIMEOUT,
+        Outcome.CANCELLED,
+        Outcome.SUPERSEDED,
+    }
     reported = [id(command) for _, command, _ in b.observer.results]
     assert len(reported) == len(tasks) == len(set(reported))
     reasons = {r.reason for r in (t.result() for t in tasks) if r.outcome is Outcome.CANCELLED}
@@ -834,3 +861,36 @@ async def test_status_word_bits_reach_the_observer_unchanged() -> None:
     assert status.warning
     assert status.word & StatusWord.BUS_CONTROL
     assert b.observer.replies[0][3] == ControlIntent(Motion.STOP)  # adopted from this reply
+
+
+# -- no pulses: a command that timed out is never undone -----------------------------------
+
+
+async def test_a_start_applied_with_its_replies_lost_is_adopted_never_stopped() -> None:
+    drive = FcDrive(1)
+    line = FcLine(drive)
+
+    def lose_start_replies(request: bytes) -> bytes | Timed | None:
+        reply = line(request)  # the drive acts on every request
+        if drive.received[-1].pcd1 & ControlWord.START and drive.received[-1].pke is None:
+            starts = [t for t in drive.received if t.pcd1 & ControlWord.START]
+            if len(starts) <= 2:  # the start and its retry: applied, unanswered
+                return None
+        return reply
+
+    b = bench(A, fc=[drive], responder=lose_start_replies, offline_after=99)
+    async with b.master:
+        await b.clock.run_until(T0 + 0.2)
+        assert b.words(1)[-1] == STOP_WORD  # adopted stopped
+        result = await b.complete(b.submit(b.master.drive("a").start(reference_pct=50.0)))
+        assert result.outcome is Outcome.TIMEOUT
+        sent_before = len(b.words(1))
+        await b.clock.run_for(0.5)
+    after = b.words(1)[sent_before:]
+    assert after, "the drive was polled after the timeout"
+    assert not [w for w in after if w & ControlWord.DATA_VALID and not w & ControlWord.START]
+    assert after[0] & ControlWord.DATA_VALID == 0  # the first poll commands nothing
+    assert after[-1] == RUN_WORD  # then what the drive shows: running at 50 %
+    assert {t.pcd2 for _, t in b.requests(1)[-3:]} == {encode_reference(50.0)}
+    assert drive.running
+    assert drive.output_pct == pytest.approx(50.0, abs=0.01)

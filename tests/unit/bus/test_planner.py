@@ -24,8 +24,15 @@ from hypothesis.stateful import (
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
-from fcmaster.bus.planner import Completion, Planner, Report, Step, StepKind
-from fcmaster.protocol.codec import DriveError, DriveStatus, ParameterValue, Reply
+from fcmaster.bus.planner import Completion, Pending, Planner, Report, Step, StepKind
+from fcmaster.protocol.codec import (
+    Condition,
+    ConditionReport,
+    DriveError,
+    DriveStatus,
+    ParameterValue,
+    Reply,
+)
 from fcmaster.protocol.danfoss_fc import ControlWord, Telegram, decode_telegram, encode_reference
 from fcmaster.protocol.danfoss_fc.codec import ALARM_WORD, WARNING_WORD, FcCodec
 
@@ -379,14 +386,175 @@ def test_changed_alarm_or_warning_bit_reads_its_word_with_the_next_poll(
     assert telegram(take(p)).pnu == 1613
 
 
-def test_drive_in_local_operation_refuses_a_command() -> None:
+def test_drive_in_local_operation_leaves_a_start_unconfirmed() -> None:
     p = planner(A)
     adopted(p)
     p.submit("a", start(10.0), "start")
     _, report = answer(p, local=True)
     ((completion,),) = [report.completions]
+    assert completion.result.outcome is Outcome.UNCONFIRMED
+    assert "local operation" in completion.result.reason
+
+
+def test_drive_in_local_operation_refuses_a_reference() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=10.0)
+    p.submit("a", set_reference(20.0), "ref")
+    _, report = answer(p, local=True, running=True, output_pct=10.0)
+    ((completion,),) = [report.completions]
     assert completion.result.outcome is Outcome.REFUSED
     assert "local operation" in completion.result.reason
+
+
+def test_drive_that_goes_local_while_a_start_waits_leaves_it_unconfirmed() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(10.0), "start")
+    assert results(answer(p, 0.0)[1]) == []  # acknowledged, still stopped
+    _, report = answer(p, 0.1, local=True)
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("start",), Outcome.UNCONFIRMED)
+    ]
+    assert "local operation" in report.completions[0].result.reason
+
+
+# -- confirmation: done only once the status shows it ------------------------------------
+
+
+def test_start_is_done_once_the_status_shows_the_drive_running() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    step, report = answer(p, 0.0)  # acknowledged, the drive not running yet
+    assert telegram(step).pcd1 == RUN_WORD
+    assert results(report) == []
+    assert not p.has_commands
+    assert p.confirming == 1
+    assert results(answer(p, 0.5)[1]) == []
+    step, report = answer(p, 1.0, running=True, output_pct=20.0)
+    assert telegram(step).pcd1 == RUN_WORD
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("start",), Outcome.DONE)
+    ]
+
+
+def test_start_ignored_by_the_drive_is_unconfirmed_at_its_deadline() -> None:
+    p = planner(dataclasses.replace(A, confirm_s=2.0))
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    answer(p, 0.0)
+    assert results(answer(p, 1.999)[1]) == []
+    _, report = answer(p, 2.0)
+    ((completion,),) = [report.completions]
+    assert completion.result.outcome is Outcome.UNCONFIRMED
+    assert completion.result.reason == (
+        "not running after 2 s: the drive reports ready but stopped (status word 0x0207)"
+    )
+
+
+def test_start_is_unconfirmed_with_the_alarm_text_when_the_drive_trips() -> None:
+    p = planner(A)
+    adopted(p)
+    while p.slot("a").urgent_reads:  # its ramp times, read once it is online
+        answer(p)
+    p.submit("a", start(50.0), "start")
+    answer(p, 0.0)
+    assert results(answer(p, 0.1, fault=True)[1]) == []  # which alarm: read next
+    step = take(p, 0.2)
+    assert telegram(step).pnu == ALARM_WORD.code
+    earth_fault = ConditionReport(
+        kind="alarm", source="16-90", active=(Condition(code=14, text="Earth fault"),)
+    )
+    alarm = dataclasses.replace(reply(1, fault=True), conditions=earth_fault)
+    (completion,) = p.on_reply(step, alarm, 0.2).completions
+    assert completion.result.outcome is Outcome.UNCONFIRMED
+    assert completion.result.reason == "the drive is tripped: Earth fault"
+
+
+def test_stop_is_done_once_the_drive_stands_and_unconfirmed_while_it_still_runs() -> None:
+    p = planner(A, dataclasses.replace(B, confirm_s=3.0))
+    adopted(p, "b", running=True, output_pct=50.0)
+    p.submit("a", STOP, "a-stop")
+    p.submit("b", STOP, "b-stop")
+    ramping = {1: 40.0, 2: 40.0}  # both acknowledge while still running
+    ended: list[tuple[float, Completion]] = []
+    now = 0.0
+    while len(ended) < 2:
+        step = take(p, now)
+        assert step.slot is not None
+        pct = ramping[step.slot.address]
+        answer_ = reply(step.slot.address, running=pct > 0, output_pct=pct)
+        ended += [(now, c) for c in p.on_reply(step, answer_, now).completions]
+        ramping[1] = 0.0  # a stands after its acknowledgement; b keeps turning
+        ramping[2] = 30.0
+        now += 0.25
+    assert [(at, c.tickets, c.result.outcome) for at, c in ended] == [
+        (0.5, ("a-stop",), Outcome.DONE),  # acknowledged at 0, standing at its next poll
+        (3.25, ("b-stop",), Outcome.UNCONFIRMED),  # acknowledged at 0.25, deadline 3 s
+    ]
+    assert ended[1][1].result.reason == (
+        "still running at 30.0 % of nominal 3 s after the command (status word 0x0A07)"
+    )
+
+
+def test_a_stop_acknowledged_while_a_start_waits_supersedes_it() -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    answer(p, 0.0)
+    p.submit("a", Command(action=Action.STOP, actor="ops"), "stop")
+    _, report = answer(p, 0.1)
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("start",), Outcome.SUPERSEDED),
+        (("stop",), Outcome.DONE),
+    ]
+    assert report.completions[0].result.reason == (
+        "superseded by stop by ops before its status showed the result"
+    )
+
+
+def test_a_drive_that_stops_answering_leaves_its_start_unconfirmed() -> None:
+    p = planner(A, offline_after=2)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    answer(p, 0.0)
+    assert results(p.on_failure(take(p, 0.1), 0.1, "no reply")) == []
+    (completion,) = p.on_failure(take(p, 0.2), 0.2, "no reply").completions
+    assert completion.result.outcome is Outcome.UNCONFIRMED
+    assert "stopped answering" in completion.result.reason
+
+
+def test_a_stop_waits_for_the_drives_own_deceleration_time_read_once_online() -> None:
+    p = planner(A, B)
+    adopted(p, "b", running=True, output_pct=50.0)
+    reads = []
+    for _ in range(4):  # each drive's acceleration and deceleration times, after adoption
+        step = take(p)
+        assert step.slot is not None
+        pnu = telegram(step).pnu
+        reads.append((step.slot.name, pnu))
+        raw = {341: 200, 342: 1500}[pnu]  # 2 s and 15 s
+        assert step.exchange.parameter is not None
+        value = ParameterValue(
+            parameter=step.exchange.parameter, index=0, raw=raw, value=raw / 100, unit="s"
+        )
+        running = step.slot.name == "b"
+        p.on_reply(step, reply(step.slot.address, running=running, output_pct=50.0 * running,
+                               value=value), 0.0)  # fmt: skip
+    assert reads == [("a", 341), ("b", 341), ("a", 342), ("b", 342)]
+    assert (p.slot("a").ramp_up_s, p.slot("a").ramp_down_s) == (2.0, 15.0)
+    p.submit("b", STOP, "stop")
+    answer(p, 1.0, running=True, output_pct=45.0)
+    (waiting,) = p.slot("b").confirming
+    assert waiting.confirm_s == 17.0  # 15 s from nominal, and a grace of 2 s
+
+
+def test_references_are_done_on_their_acknowledgement() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=10.0)
+    p.submit("a", set_reference(20.0), "ref")
+    _, report = answer(p, 0.0, running=True, output_pct=10.0)  # not at 20 % yet
+    assert results(report) == [Outcome.DONE]
 
 
 def test_parameter_read_ends_done_with_the_value_and_ak_7_ends_refused() -> None:
@@ -481,9 +649,9 @@ def test_stop_supersedes_queued_motion_commands_of_that_drive_only() -> None:
     p.submit("b", start(10.0), "other")
     ended = p.submit("a", STOP, "stop")
     assert [(c.tickets, c.result.outcome, c.result.reason) for c in ended] == [
-        (("start",), Outcome.CANCELLED, "superseded by stop"),
-        (("jog",), Outcome.CANCELLED, "superseded by stop"),
-        (("ref",), Outcome.CANCELLED, "superseded by stop"),
+        (("start",), Outcome.SUPERSEDED, "superseded by stop"),
+        (("jog",), Outcome.SUPERSEDED, "superseded by stop"),
+        (("ref",), Outcome.SUPERSEDED, "superseded by stop"),
     ]
     left = []
     while p.has_commands:
@@ -504,7 +672,8 @@ def test_stop_does_not_cancel_a_start_already_on_the_wire() -> None:
     ]
     step, report = answer(p, running=True, output_pct=50.0)
     assert telegram(step).pcd1 == STOP_WORD
-    assert results(report) == [Outcome.DONE]
+    assert results(report) == []  # acknowledged; the drive still runs
+    assert results(answer(p)[1]) == [Outcome.DONE]
 
 
 def test_at_shutdown_only_stops_and_the_command_on_the_wire_are_kept() -> None:
@@ -523,30 +692,95 @@ def test_at_shutdown_only_stops_and_the_command_on_the_wire_are_kept() -> None:
     assert results(p.on_reply(in_flight, reply(1, running=True, output_pct=50.0), 0.0)) == [
         Outcome.DONE
     ]
-    step, report = answer(p, running=True, output_pct=50.0)
+    step, report = answer(p)
     assert (step.slot.name if step.slot else None, telegram(step).pcd1) == ("a", STOP_WORD)
     assert results(report) == [Outcome.DONE]
     assert not p.has_commands
 
 
-def test_stop_does_not_cancel_a_start_whose_first_attempt_failed() -> None:
+def test_stop_supersedes_a_start_waiting_for_its_retry_so_no_start_follows_the_stop() -> None:
     p = planner(A)
     adopted(p)
     p.submit("a", start(50.0), "start")
-    p.on_failure(take(p), 0.0, "no reply")
-    assert p.submit("a", STOP, "stop") == []
+    first = take(p)
+    assert telegram(first).pcd1 == RUN_WORD
+    p.on_failure(first, 0.0, "no reply")
+    ((ended,),) = [p.submit("a", Command(action=Action.STOP, actor="ops"), "stop")]
+    assert ended.tickets == ("start",)
+    assert ended.result.outcome is Outcome.SUPERSEDED
+    assert ended.result.reason.startswith("superseded by stop by ops (part of it went out")
+    words = []
+    for _ in range(4):
+        words.append(telegram(answer(p)[0]).pcd1)
+    assert words == [STOP_WORD] * 4  # start, stop, and never start again
+
+
+@pytest.mark.parametrize(
+    ("applied", "word", "reference"),
+    [
+        pytest.param({"running": True, "output_pct": 50.0}, RUN_WORD, 50.0, id="applied"),
+        pytest.param({}, STOP_WORD, 0.0, id="not-applied"),
+    ],
+)
+def test_a_timed_out_start_is_followed_by_no_stop_and_the_drive_is_adopted_again(
+    applied: dict[str, Any], word: int, reference: float
+) -> None:
+    p = planner(A)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    attempts = []
+    for n in range(2):
+        step = take(p, float(n))
+        assert telegram(step).pcd1 == RUN_WORD
+        attempts.append(p.on_failure(step, float(n), "no reply"))
+    assert results(*attempts) == [Outcome.TIMEOUT]
+    step, _ = answer(p, 2.0, **applied)  # the drive's state, whatever the start did
+    assert not telegram(step).pcd1 & ControlWord.DATA_VALID  # commands nothing, no stop
+    after = telegram(take(p, 3.0))
+    assert (after.pcd1, after.pcd2) == (word, encode_reference(reference))
+
+
+def test_a_timed_out_stop_is_kept() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=50.0)
+    p.submit("a", STOP, "stop")
+    for n in range(2):
+        p.on_failure(take(p, float(n)), float(n), "no reply")
+    step, _ = answer(p, 2.0, running=True, output_pct=50.0)
+    assert telegram(step).pcd1 == STOP_WORD
 
 
 def test_queued_references_coalesce_and_the_newest_wins() -> None:
     p = planner(A)
     adopted(p, running=True, output_pct=10.0)
+    ended = []
     for pct in (20.0, 30.0, 40.0):
-        assert p.submit("a", set_reference(pct), pct) == []
+        ended += p.submit("a", set_reference(pct), pct)
+    assert [(c.tickets, c.result.outcome) for c in ended] == [
+        ((20.0,), Outcome.SUPERSEDED),
+        ((30.0,), Outcome.SUPERSEDED),
+    ]
     step, report = answer(p)
     assert telegram(step).pcd2 == encode_reference(40.0)
     ((completion,),) = [report.completions]
-    assert completion.tickets == (20.0, 30.0, 40.0)
+    assert completion.tickets == (40.0,)
     assert not p.has_commands
+
+
+def test_a_coalesced_reference_ends_superseded_naming_the_newer_one() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=10.0)
+    assert p.submit("a", set_reference(20.0), "first") == []
+    newer = Command(action=Action.SET_REFERENCE, reference_pct=30.0, actor="ops")
+    ((ended,),) = [p.submit("a", newer, "second")]
+    assert (ended.tickets, ended.command.reference_pct) == (("first",), 20.0)
+    assert ended.result.outcome is Outcome.SUPERSEDED
+    assert ended.result.reason == "superseded by set_reference 30 % by ops"
+    step, report = answer(p, running=True, output_pct=30.0)
+    assert telegram(step).pcd2 == encode_reference(30.0)
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("second",), Outcome.DONE)
+    ]
 
 
 def test_reference_does_not_coalesce_into_one_already_on_the_wire() -> None:
@@ -659,8 +893,13 @@ class PlannerMachine(RuleBasedStateMachine):
                 self.ends.setdefault(ticket, []).append(completion.result)
                 self.urgent.discard(ticket)
 
+    def _confirming(self) -> list[Pending]:
+        return [pending for slot in self.planner.slots for pending in slot.confirming]
+
     def _report(self, report: Report) -> None:
         self._ended(report.completions)
+        # Every exchange's report ends the confirmations whose deadline has passed.
+        assert all(pending.confirm_by > self.now for pending in self._confirming())
         for transition in report.transitions:
             name = transition.drive.name
             if transition.online:
@@ -718,7 +957,8 @@ class PlannerMachine(RuleBasedStateMachine):
     def send(self, elapsed: float) -> None:
         self.now += elapsed
         step = self.planner.next_step(self.now)
-        if self.urgent:
+        waiting = {ticket for pending in self._confirming() for ticket in pending.tickets}
+        if self.urgent - waiting:  # acknowledged stops wait for their status, not the line
             assert step is not None
             assert step.kind is StepKind.COMMAND
             assert step.pending is not None

@@ -137,3 +137,12 @@ def test_time_never_runs_backwards() -> None:
     motor.advance(5.0)
     assert motor.frequency_hz == pytest.approx(25.0)
     assert motor.updated_at == 10.5
+
+
+def test_an_interlocked_motor_hears_a_run_command_and_stays_off() -> None:
+    motor = Motor(RATED, 0.0)
+    motor.interlocked = True
+    motor.set_command(run(25.0, ramp_up_s=1.0), 0.0)
+    motor.advance(2.0)
+    assert motor.frequency_hz == 0.0
+    assert not motor.output_on

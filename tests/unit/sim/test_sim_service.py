@@ -53,7 +53,8 @@ def test_simulation_section_sets_faults_load_and_parameters() -> None:
     simulation = {
         "seed": 4, "faults": "corrupt=0.5", "load": 0.3, "response_delay_ms": 12,
         "drives": {"7": {"load": 0.9, "faults": {"drop": 1.0}, "parameters": {"3-41": 1.5},
-                         "local": True}},
+                         "local": True},
+                   "3": {"interlocked": True}},
     }  # fmt: skip
     transport = sim_transport(PLAN, simulation, clock=clock)
     line = transport.line
@@ -63,6 +64,8 @@ def test_simulation_section_sets_faults_load_and_parameters() -> None:
     assert (fc(line, 3).motor.load, fc(line, 7).motor.load) == (0.3, 0.9)
     assert fc(line, 7).parameters.value(341) == 1.5
     assert fc(line, 7).control.local
+    assert fc(line, 3).motor.interlocked
+    assert not fc(line, 7).motor.interlocked
     assert fc(line, 3).response_delay_s == 0.012
     line.write(encode_telegram(control(7, START)))
     assert line.next_delivery() is None  # drive 7 drops every reply
