@@ -341,6 +341,7 @@ def create_app(
                 "bus": plan.name,
                 "protocol": plan.protocol,
                 "baudrate": plan.baudrate,
+                "databits": plan.databits,
                 "parity": plan.parity,
                 "stopbits": plan.stopbits,
                 "next": got.next,

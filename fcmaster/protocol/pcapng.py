@@ -19,8 +19,9 @@ enc                USER2        149
 
 A packet is one frame as the master's port saw it: outbound (``epb_flags`` direction 2)
 is a request the master wrote, inbound (1) bytes it read. A line's interface carries its
-bus name (``if_name``), its protocol and character format (``if_description``, also in a
-comment) and its baud rate (``if_speed``), which is what a replay needs to serve it.
+bus name (``if_name``), its protocol and character format (``if_description``, as
+:class:`LineFormat` writes it: ``danfoss-fc 19200 8E1``) and its baud rate (``if_speed``),
+which is what a replay needs to serve it.
 """
 
 from __future__ import annotations
@@ -84,6 +85,31 @@ class Capture:
     application: str = ""
     interfaces: list[Interface] = field(default_factory=list)
     packets: list[Packet] = field(default_factory=list)
+
+
+@dataclass(slots=True, frozen=True)
+class LineFormat:
+    """A serial line as an interface's description gives it: ``danfoss-fc 19200 8E1``."""
+
+    protocol: str
+    baudrate: int
+    databits: int = 8
+    parity: str = "E"
+    stopbits: int = 1
+
+    def __str__(self) -> str:
+        return f"{self.protocol} {self.baudrate} {self.databits}{self.parity}{self.stopbits}"
+
+    @classmethod
+    def parse(cls, text: str) -> LineFormat | None:
+        """The format in ``text``, or None where it is not one."""
+        parts = text.split()
+        if len(parts) != 3 or not parts[1].isdigit() or len(parts[2]) != 3:
+            return None
+        bits, parity, stop = parts[2][0], parts[2][1], parts[2][2]
+        if not (bits.isdigit() and stop.isdigit() and parity in "NEO"):
+            return None
+        return cls(parts[0], int(parts[1]), int(bits), parity, int(stop))
 
 
 def _pad(data: bytes) -> bytes:
