@@ -236,6 +236,7 @@ class Link:
         framer.reset()
         while (piece := framer.next_frame()) is not None:
             self.stats.late_bytes += len(piece.data)
+            self.frames.add(RX, piece.data, self._arrived)
 
     def _record(self, kind: str, data: bytes) -> None:
         self._recorder.append((kind, data))

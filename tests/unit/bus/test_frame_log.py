@@ -5,6 +5,10 @@ from __future__ import annotations
 import time
 
 from fcmaster.bus.frame_log import RX, TX, FrameLog
+from fcmaster.bus.plan import DrivePlan
+from tests.fakes import Timed
+from tests.unit.bus.bench import bench
+from tests.unit.bus.fcdrive import FcDrive, FcLine
 
 
 def test_a_follower_gets_every_frame_once_in_order() -> None:
@@ -49,3 +53,31 @@ def test_numbers_from_before_a_restart_start_the_follower_afresh() -> None:
     got = log.since(50)
     assert [f[0] for f in got.frames] == [0]
     assert (got.next, got.missed) == (1, 0)
+
+
+async def test_the_link_logs_each_request_and_what_came_back_when_it_came() -> None:
+    line = FcLine(FcDrive(1))
+    replies: list[bytes] = []
+
+    def noisy(request: bytes) -> Timed | None:
+        reply = line(request)
+        assert isinstance(reply, bytes)
+        replies.append(reply)
+        return Timed(((0.005, b"\xff"), (0.020, reply)))  # a noise byte, then the reply
+
+    bus = bench(DrivePlan(name="d1", address=1), responder=noisy)
+    async with bus.master:
+        await bus.clock.run_for(0.3)
+    frames = bus.master.frames.since(0).frames
+    sent = bus.transport.sent
+    assert len(sent) > 5
+    logged = [(direction, mono, data) for _, direction, mono, _, data in frames]
+    expected = []
+    for request, reply in zip(sent[:-1], replies, strict=False):  # the last may be under way
+        expected += [
+            ("tx", request.at, request.data),
+            ("rx", request.at + 0.005, b"\xff"),
+            ("rx", request.at + 0.020, reply),
+        ]
+    assert logged[: len(expected)] == expected
+    assert logged[len(expected)] == ("tx", sent[-1].at, sent[-1].data)
