@@ -119,7 +119,7 @@ async def capture(
     end = clock.now() + seconds
     counts = {"tx": 0, "rx": 0}
     missed_total = 0
-    anchor: float | None = None  # wall minus monotonic time of the daemon, from the first frame
+    anchor_us: int | None = None  # the daemon's wall minus monotonic time, at the first frame
     try:
         file = await asyncio.to_thread(output.open, "wb")
         with file:
@@ -130,9 +130,9 @@ async def capture(
                 missed = body["missed"]
                 missed_total += missed
                 for frame in body["frames"]:
-                    if anchor is None:
-                        anchor = frame["time"] - frame["mono"]
-                    _write(file, frame, anchor, missed)
+                    if anchor_us is None:
+                        anchor_us = round(frame["time"] * 1e6) - round(frame["mono"] * 1e6)
+                    _write(file, frame, anchor_us, missed)
                     counts[frame["dir"]] = counts.get(frame["dir"], 0) + 1
                     missed = 0
                 file.flush()
@@ -151,12 +151,14 @@ async def capture(
     return 0
 
 
-def _write(file: BinaryIO, frame: dict[str, Any], anchor: float, missed: int) -> None:
+def _write(file: BinaryIO, frame: dict[str, Any], anchor_us: int, missed: int) -> None:
     direction = pcapng.OUTBOUND if frame["dir"] == "tx" else pcapng.INBOUND
     comment = f"{missed} frames missed before this one" if missed else ""
     packet = Packet(
         interface=0,
-        timestamp_us=round((frame["mono"] + anchor) * 1_000_000),
+        # in whole microseconds before adding: a sum near 1.8e9 s in floating point would
+        # jitter by a microsecond and lose the frames' exact spacing
+        timestamp_us=round(frame["mono"] * 1e6) + anchor_us,
         data=bytes.fromhex(frame["data"]),
         direction=direction,
         comment=comment,
