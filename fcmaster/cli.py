@@ -190,6 +190,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
     sim.add_argument("--name", default="line1", help="the bus name printed before the path")
     sim.add_argument("--link", help="also make this path a symbolic link to the pty")
+    sim.add_argument(
+        "--replay", type=Path, metavar="FILE",
+        help="answer as the drives did in this capture (from fcmaster capture)",
+    )  # fmt: skip
     sim.add_argument("--faults", default="", help="e.g. drop=0.05,corrupt=0.01,late=0.01,echo")
     sim.add_argument("--response-delay-ms", type=float, help="every drive's 8-35 (default 10)")
     sim.add_argument(
@@ -227,6 +231,17 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     doctor.add_argument("--timeout", type=_seconds, help="reply deadline in seconds")
     doctor.add_argument("--json", action="store_true", help="print JSON")
+
+    capture = commands.add_parser(
+        "capture", help="record a running line's frames to a pcapng file",
+        description="Follow a running daemon's line for some seconds and write its frames, "
+        "with their directions and times, to a pcapng file (Wireshark reads it).",
+    )  # fmt: skip
+    capture.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
+    capture.add_argument("--bus", required=True, metavar="NAME", help="the line to record")
+    capture.add_argument("--seconds", type=float, required=True, metavar="S", help="how long")
+    capture.add_argument("-o", "--output", type=Path, required=True, metavar="FILE.pcapng")
+    capture.add_argument("--token", help="a viewer token (default: $FCM_TOKEN)")
 
     monitor = commands.add_parser("monitor", help="a running daemon's fleet as a live table")
     monitor.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
@@ -425,6 +440,12 @@ def _cmd_doctor(args: argparse.Namespace) -> int:
     )  # fmt: skip
 
 
+def _cmd_capture(args: argparse.Namespace) -> int:
+    from fcmaster.commands import capture
+
+    return _run_async(capture.capture(args.url, args.bus, args.seconds, args.output, args.token))
+
+
 def _cmd_monitor(args: argparse.Namespace) -> int:
     from fcmaster.commands import monitor
 
@@ -458,6 +479,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "decode": _cmd_decode,
     "sim": _cmd_sim,
     "monitor": _cmd_monitor,
+    "capture": _cmd_capture,
     "ports": _cmd_ports,
     "doctor": _cmd_doctor,
     "params": _cmd_params,

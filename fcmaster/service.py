@@ -39,6 +39,7 @@ from fcmaster.adapters.gateway import LineInfo
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.echo import EchoCancellingTransport
+from fcmaster.bus.frame_log import FramesSince
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
@@ -155,6 +156,11 @@ class Service:
                 )
             )
         return infos
+
+    def line_frames(self, name: str, since: int) -> tuple[LinePlan, FramesSince] | None:
+        """Line ``name``'s plan and its recent frames from ``since`` on (None: no such line)."""
+        master = self.masters.get(name)
+        return None if master is None else (master.plan, master.frames.since(since))
 
     def master_of(self, drive: str) -> BusMaster:
         """The BusMaster of the line drive ``drive`` hangs on; KeyError if none."""

@@ -323,6 +323,37 @@ def create_app(
             raise HTTPException(404, f"no line called {name!r}")
         return json_response({"bus": name, **gateway.fleet.history.line(name)})
 
+    @app.get("/api/v1/buses/{name}/frames", responses={**_AUTH_ERRORS, 404: _DRIVE_ERRORS[404]})
+    async def bus_frames(name: str, _: Viewer, since: Annotated[int, Query(ge=0)] = 0) -> Response:
+        """The line's recent frames (a ring of the last few thousand), from number ``since``.
+
+        Each frame has its number ``seq``, direction ``dir`` (``tx``: the master's request,
+        ``rx``: bytes the master read), ``time`` (Unix seconds), ``mono`` (the daemon's
+        monotonic seconds) and ``data`` (hex). Ask again with ``since`` = ``next`` to
+        follow the line without gaps; ``missed`` counts the frames that had left the ring.
+        """
+        found = gateway.line_frames(name, since)
+        if found is None:
+            raise HTTPException(404, f"no line called {name!r}")
+        plan, got = found
+        frames = [
+            {"seq": seq, "dir": direction, "time": wall, "mono": mono, "data": data.hex()}
+            for seq, direction, mono, wall, data in got.frames
+        ]
+        return json_response(
+            {
+                "bus": plan.name,
+                "protocol": plan.protocol,
+                "baudrate": plan.baudrate,
+                "databits": plan.databits,
+                "parity": plan.parity,
+                "stopbits": plan.stopbits,
+                "next": got.next,
+                "missed": got.missed,
+                "frames": frames,
+            }
+        )
+
     @app.get("/api/v1/whoami", response_model=PrincipalOut, responses=_AUTH_ERRORS)
     async def whoami(principal: Viewer) -> Response:
         """The caller's name and role, as the API sees them."""

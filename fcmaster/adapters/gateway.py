@@ -6,7 +6,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from fcmaster.bus.commands import Command, CommandResult
-from fcmaster.bus.plan import DrivePlan
+from fcmaster.bus.frame_log import FramesSince
+from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.hub import Hub
 from fcmaster.state import FleetState
 
@@ -54,6 +55,9 @@ class Gateway(Protocol):
 
     def lines(self) -> list[LineInfo]:
         """Every line with its statistics."""
+
+    def line_frames(self, name: str, since: int) -> tuple[LinePlan, FramesSince] | None:
+        """Line ``name``'s plan and its frames numbered ``since`` and after; None: no line."""
 
     async def execute(self, drive: str, command: Command) -> CommandResult:
         """Carry out ``command`` on drive ``drive``; one result, always."""

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections import deque
 
+from fcmaster.bus.frame_log import RX, TX, FrameLog
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.stats import LineStats
 from fcmaster.bus.transport import Transport
@@ -56,6 +57,7 @@ class Link:
         self.clock = clock
         self.stats = stats or LineStats()
         self._recorder: deque[tuple[str, bytes]] = deque(maxlen=32)  # flight recorder
+        self.frames = FrameLog()  # the frames with their times, for captures
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
         self.written_at = 0.0  # when the last request was written
         self.ready_at = 0.0  # when the next request may go (pause, drain or broadcast wait)
@@ -107,6 +109,7 @@ class Link:
         if stale:
             stats.late_bytes += len(stale)
             self._record("discarded", stale)
+            self.frames.add(RX, stale, self.transport.received_at)
             if self._missed is not None:
                 # Most likely the reply that missed its deadline: how late it really was
                 # counts too, so the deadline widens instead of missing replies again.
@@ -121,6 +124,7 @@ class Link:
             self._replied_at = None
         await self.transport.write(exchange.request)
         self._recorder.append(("tx", exchange.request))
+        self.frames.add(TX, exchange.request, written_at)
         stats.requests += 1
         if not exchange.expects_reply:
             # Broadcasts and resets get no answer: give the drives time to act on them.
@@ -198,6 +202,7 @@ class Link:
         """Hand the framer's pieces to the codec until one answers ``exchange``."""
         stats, framer = self.stats, self._framer
         while (piece := framer.next_frame()) is not None:
+            self.frames.add(RX, piece.data, self._arrived)
             if isinstance(piece, Frame):
                 try:
                     reply = self.codec.parse(exchange, piece.data)
@@ -231,6 +236,7 @@ class Link:
         framer.reset()
         while (piece := framer.next_frame()) is not None:
             self.stats.late_bytes += len(piece.data)
+            self.frames.add(RX, piece.data, self._arrived)
 
     def _record(self, kind: str, data: bytes) -> None:
         self._recorder.append((kind, data))

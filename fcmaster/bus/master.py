@@ -40,6 +40,7 @@ from typing import Protocol
 import structlog
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.frame_log import FrameLog
 from fcmaster.bus.link import Link
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.planner import Completion, Planner, Report, Step, StepKind
@@ -468,6 +469,11 @@ class BusMaster:
                     call()
                 except Exception as exc:  # the same: isolated from the line
                     self._observer_failed(call, exc)
+
+    @property
+    def frames(self) -> FrameLog:
+        """The line's frames with their times, for captures."""
+        return self._link.frames
 
     @property
     def recent_frames(self) -> list[str]:

@@ -14,13 +14,17 @@ import signal
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Final, TextIO
 
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import load
 from fcmaster.errors import UsageError
+from fcmaster.protocol import pcapng
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line, parse_faults
+from fcmaster.sim.line import SimLine
+from fcmaster.sim.replay import replay_lines, replay_sim_line
 from fcmaster.sim.service import sim_settings
 
 SIM_MAX_LEAD_S: Final = 0.001
@@ -36,7 +40,11 @@ class SimBus:
 
 
 async def run(args: argparse.Namespace) -> int:
-    """Serve the buses of ``--config``, or the one line the other options describe."""
+    """Serve the buses of ``--config``, a capture's (``--replay``), or the one line described."""
+    if args.replay is not None:
+        if args.config is not None:
+            raise UsageError("--replay serves the lines of a capture; leave out --config")
+        return await replay(args.replay, link=args.link)
     if args.config is not None:
         return await serve(config_buses(args.config, only=args.bus))
     if args.bus:
@@ -100,10 +108,57 @@ async def serve(
     """
     # A simulator's job is to keep time, so it may spin up to 1 ms to answer on time.
     clock = clock or MonotonicClock(max_lead_s=SIM_MAX_LEAD_S)
-    out = out or sys.stdout
     names = [bus.settings.name for bus in buses]
     if len(set(names)) != len(names):
         raise UsageError(f"bus names must differ: {names}")
+    lines = [
+        (bus.settings.name, build_line(bus.settings, bus.drives, clock=clock), bus.link)
+        for bus in buses
+    ]
+    return await _serve_lines(lines, clock=clock, out=out, stop=stop)
+
+
+async def replay(
+    path: Path,
+    *,
+    link: str | None = None,
+    clock: Clock | None = None,
+    out: TextIO | None = None,
+    stop: asyncio.Event | None = None,
+) -> int:
+    """Serve the drives' side of the capture at ``path``; print each request it answers."""
+    clock = clock or MonotonicClock(max_lead_s=SIM_MAX_LEAD_S)
+    out = out or sys.stdout
+    try:
+        capture = pcapng.decode(await asyncio.to_thread(path.read_bytes))
+    except OSError as exc:
+        raise UsageError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    except pcapng.PcapngError as exc:
+        raise UsageError(f"{path}: {exc}") from exc
+    captured = replay_lines(capture)
+    if link is not None and len(captured) > 1:
+        raise UsageError(f"{path} holds {len(captured)} lines: --link needs a capture of one")
+    lines = []
+    for line in captured:
+        served = partial(_print_served, line.name, out)
+        sim_line = replay_sim_line(line, clock=clock, served=served)
+        lines.append((line.name, sim_line, link))
+    return await _serve_lines(lines, clock=clock, out=out, stop=stop)
+
+
+def _print_served(name: str, out: TextIO, request: bytes, reply: bytes | None) -> None:
+    answer = "(no answer)" if reply is None else reply.hex(" ")
+    print(f"{name} {request.hex(' ')} -> {answer}", file=out, flush=True)
+
+
+async def _serve_lines(
+    lines: Sequence[tuple[str, SimLine, str | None]],
+    *,
+    clock: Clock,
+    out: TextIO | None,
+    stop: asyncio.Event | None,
+) -> int:
+    out = out or sys.stdout
     loop = asyncio.get_running_loop()
     handled: list[signal.Signals] = []
     if stop is None:
@@ -113,11 +168,10 @@ async def serve(
             handled.append(signum)
     try:
         async with contextlib.AsyncExitStack() as stack:
-            for bus in buses:
-                line = build_line(bus.settings, bus.drives, clock=clock)
-                server = PtyServer(line, clock=clock, link=bus.link)
+            for name, line, link in lines:
+                server = PtyServer(line, clock=clock, link=link)
                 await stack.enter_async_context(server)
-                print(f"{bus.settings.name} {server.device}", file=out, flush=True)
+                print(f"{name} {server.device}", file=out, flush=True)
             await stop.wait()
     finally:
         for signum in handled:

@@ -13,6 +13,7 @@ from typing import Any
 
 from fcmaster.adapters.gateway import LineInfo
 from fcmaster.bus.commands import Command, CommandResult, Outcome
+from fcmaster.bus.frame_log import FrameLog, FramesSince
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.stats import LineStats
 from fcmaster.clock import MonotonicClock
@@ -57,6 +58,7 @@ class FakeGateway:
         self.adapters: dict[str, dict[str, Any]] = {}  # the USB adapter a line's port is on
         self.respond = respond
         self.executed: list[tuple[str, Command]] = []
+        self.frames: dict[str, FrameLog] = {}  # what each line's link would have logged
 
     def drive_plan(self, name: str) -> DrivePlan | None:
         for line in self.plans:
@@ -80,6 +82,12 @@ class FakeGateway:
             )
             for line in self.plans
         ]
+
+    def line_frames(self, name: str, since: int) -> tuple[LinePlan, FramesSince] | None:
+        for line in self.plans:
+            if line.name == name:
+                return line, self.frames.setdefault(name, FrameLog()).since(since)
+        return None
 
     async def execute(self, drive: str, command: Command) -> CommandResult:
         self.executed.append((drive, command))

@@ -14,6 +14,7 @@ from structlog.testing import capture_logs
 
 from fcmaster.adapters.readlimit import VIEWER_READ_GAP_S
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.frame_log import RX, TX, FrameLog
 from fcmaster.protocol.codec import DriveError, ParameterKey, ParameterValue
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
@@ -147,6 +148,36 @@ async def test_a_line_s_history_has_its_rates(
     assert len(history["t"]) == 1
     assert history["series"]["requests_per_s"][0] > 0
     assert (await client.get("/api/v1/buses/nope/history", headers=VIEWER)).status_code == 404
+
+
+async def test_a_line_s_frames_come_numbered_so_a_follower_misses_none(
+    gateway: FakeGateway, client: httpx.AsyncClient
+) -> None:
+    log = gateway.frames.setdefault("line1", FrameLog())
+    log.add(TX, b"\x02\x0e\x01", 10.0)
+    log.add(RX, b"\x02\x0e\x01\x33", 10.02)
+    response = await client.get("/api/v1/buses/line1/frames", headers=VIEWER)
+    assert response.status_code == 200
+    body = response.json()
+    assert (body["bus"], body["protocol"], body["next"], body["missed"]) == (
+        "line1",
+        "danfoss-fc",
+        2,
+        0,
+    )
+    assert body["baudrate"] == gateway.plans[0].baudrate
+    assert [(f["seq"], f["dir"], f["mono"], f["data"]) for f in body["frames"]] == [
+        (0, "tx", 10.0, "020e01"),
+        (1, "rx", 10.02, "020e0133"),
+    ]
+    assert abs(body["frames"][0]["time"] - time.time()) < 60
+    log.add(TX, b"\x02", 11.0)
+    more = (await client.get("/api/v1/buses/line1/frames?since=2", headers=VIEWER)).json()
+    assert [f["seq"] for f in more["frames"]] == [2]
+    assert (await client.get("/api/v1/buses/line1/frames")).status_code == 401
+    assert (await client.get("/api/v1/buses/nope/frames", headers=VIEWER)).status_code == 404
+    bad = await client.get("/api/v1/buses/line1/frames?since=-1", headers=VIEWER)
+    assert bad.status_code == 422
 
 
 async def test_whoami_names_the_token_and_its_role(client: httpx.AsyncClient) -> None:

@@ -1,0 +1,145 @@
+"""Replaying a capture: which answer each request gets, when, and a BusMaster's view of it."""
+
+from __future__ import annotations
+
+import pytest
+
+from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.frame_log import TX
+from fcmaster.bus.master import BusMaster
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.errors import UsageError
+from fcmaster.protocol import pcapng
+from fcmaster.protocol.framing import Frame
+from fcmaster.protocol.pcapng import Capture, Interface, LineFormat, Packet
+from fcmaster.sim import SimTransport
+from fcmaster.sim.replay import KnownRequestFramer, ReplayDrive, replay_lines, replay_sim_line
+from fcmaster.sim.service import sim_line
+from tests.fakes import VirtualClock
+
+IFACE = Interface(link_type=147, name="north", description="danfoss-fc 9600 8N1", speed=9600)
+CHAR_US = 10 / 9600 * 1e6  # 8N1: ten bits a character
+
+
+def out(at_us: float, data: bytes) -> Packet:
+    return Packet(0, round(at_us), data, pcapng.OUTBOUND)
+
+
+def into(at_us: float, data: bytes) -> Packet:
+    return Packet(0, round(at_us), data, pcapng.INBOUND)
+
+
+def test_each_request_gets_what_followed_it_each_time_with_its_turnaround() -> None:
+    a, b = b"AAAA", b"BB"
+    wire_a = 8 * CHAR_US  # four bytes out, four back
+    packets = [
+        out(0, a),
+        into(wire_a + 20_000, b"r1r1"),  # 20 ms beyond the wire time
+        out(100_000, a),  # no reply: a timeout in the field
+        out(200_000, a),
+        into(200_000 + wire_a + 5_000, b"r3r3"),
+        out(300_000, b),
+        into(300_000 + 1_000, b"~"),  # noise, then the reply: served together
+        into(300_000 + 5 * CHAR_US + 7_000, b"rb"),
+    ]
+    (line,) = replay_lines(Capture("", [IFACE], packets))
+    assert line.name == "north"
+    assert line.format == LineFormat("danfoss-fc", 9600, 8, "N", 1)
+    (r1, d1), (none, _), (r3, d3) = line.answers[a]
+    assert (r1, none, r3) == (b"r1r1", None, b"r3r3")
+    assert d1 == pytest.approx(0.020, abs=1e-5)
+    assert d3 == pytest.approx(0.005, abs=1e-5)
+    ((rb, db),) = line.answers[b]
+    assert rb == b"~rb"
+    assert db == pytest.approx(0.007, abs=1e-5)
+
+
+def test_a_replayed_drive_serves_in_order_and_stays_silent_for_unknown_requests() -> None:
+    served: list[tuple[bytes, bytes | None]] = []
+    drive = ReplayDrive(
+        {b"A": [(b"1", 0.01), (None, 0.0), (b"3", 0.02)]},
+        lambda request, reply: served.append((request, reply)),
+    )
+    replies = [drive.handle(b"A", 0.0) for _ in range(5)]
+    assert replies == [b"1", None, b"3", b"3", b"3"]
+    assert drive.response_delay_s == 0.02
+    assert drive.handle(b"Z", 0.0) is None
+    assert served[-1] == (b"Z", None)
+    assert served[0] == (b"A", b"1")
+
+
+def test_the_framer_cuts_known_requests_and_reports_unknown_bytes_as_one_piece() -> None:
+    unknown: list[bytes] = []
+    framer = KnownRequestFramer([b"\x02AB", b"\x02CD"], unknown.append)
+    pieces = []
+    for byte in b"xy\x02AB\x02ZZ\x02CD":
+        framer.feed(bytes([byte]))
+        while (piece := framer.next_frame()) is not None:
+            pieces.append(piece)
+    frames = [p.data for p in pieces if isinstance(p, Frame)]
+    assert frames == [b"\x02AB", b"\x02CD"]
+    assert unknown == [b"xy", b"\x02ZZ"]
+    assert sum(len(p.data) for p in pieces) == len(b"xy\x02AB\x02ZZ\x02CD")
+    framer.feed(b"\x02Q")
+    assert framer.next_frame() is not None  # "\x02Q" is no known prefix: skipped
+    framer.feed(b"\x02A")  # an unfinished known request, then a pause
+    assert framer.next_frame() is None
+    framer.reset()
+    assert unknown[-1] == b"\x02Q\x02A"
+    assert framer.next_frame() is not None
+    assert framer.next_frame() is None
+
+
+def test_a_capture_of_another_program_is_refused_by_name() -> None:
+    stranger = Interface(link_type=1, name="eth0", description="")
+    with pytest.raises(UsageError, match="eth0"):
+        replay_lines(Capture("", [stranger], []))
+    with pytest.raises(UsageError, match="no lines"):
+        replay_lines(Capture("", [], []))
+
+
+def _capture_of(master: BusMaster) -> Capture:
+    plan = master.plan
+    fmt = LineFormat(plan.protocol, plan.baudrate, plan.databits, plan.parity, plan.stopbits)
+    iface = Interface(pcapng.LINK_TYPES[plan.protocol], plan.name, str(fmt), plan.baudrate)
+    packets = [
+        Packet(0, round(mono * 1e6), data, pcapng.OUTBOUND if d == TX else pcapng.INBOUND)
+        for _, d, mono, _, data in master.frames.since(0).frames
+    ]
+    return pcapng.decode(pcapng.encode(Capture("test", [iface], packets)))
+
+
+def _plan(protocol: str) -> LinePlan:
+    return LinePlan(
+        name="north",
+        port="sim://north",
+        protocol=protocol,
+        drives=tuple(DrivePlan(name=f"d{a}", address=a) for a in (1, 2)),
+    )
+
+
+@pytest.mark.parametrize("protocol", sorted(pcapng.LINK_TYPES))
+async def test_a_master_on_the_replay_gets_the_replies_the_captured_master_got(
+    protocol: str,
+) -> None:
+    plan = _plan(protocol)
+    clock = VirtualClock()
+    line = sim_line(plan, {}, clock=clock)
+    first = BusMaster(plan, codec=codec_for(plan), transport=SimTransport(line, clock), clock=clock)
+    async with first:
+        await clock.run_for(2.0)
+    capture = _capture_of(first)
+    (replayed,) = replay_lines(capture)
+
+    clock = VirtualClock()
+    replay = replay_sim_line(replayed, clock=clock)
+    transport = SimTransport(replay, clock)
+    second = BusMaster(plan, codec=codec_for(plan), transport=transport, clock=clock)
+    async with second:
+        await clock.run_for(2.0)
+    before = [(d, data) for _, d, _, _, data in first.frames.since(0).frames]
+    after = [(d, data) for _, d, _, _, data in second.frames.since(0).frames]
+    assert len(before) > 50
+    assert after[:50] == before[:50]  # the same requests, answered with the same bytes
+    assert second.stats.replies >= 0.9 * first.stats.replies
+    assert second.stats.timeouts == first.stats.timeouts == 0
