@@ -26,6 +26,7 @@ read, write, control) drive one directly.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Awaitable, Callable
 
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.stats import LineStats
@@ -33,9 +34,12 @@ from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock
 from fcmaster.errors import MalformedReply, ProtocolError, ReplyTimeout, UnexpectedReply
 from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
-from fcmaster.protocol.framing import Frame, SkipReason
+from fcmaster.protocol.framing import Frame, Framer, Skipped, SkipReason
 
 ANSWER_SAMPLES = 8  # replies timed before deadlines follow the line
+
+# A transport that feeds the framer in its reader callback (SerialTransport.read_frame).
+ReadFrame = Callable[[Framer, float, float], Awaitable[Frame | Skipped | None]]
 
 
 class Link:
@@ -62,6 +66,9 @@ class Link:
         self.replied_at = 0.0  # when the last byte of the last reply arrived
         self._arrived = 0.0
         self._framer = codec.new_framer()
+        self.gap_s = plan.gap_s
+        # Transports that can frame as bytes arrive wake the Link once per reply.
+        self._read_frame: ReadFrame | None = getattr(transport, "read_frame", None)
         self._replied_at: float | None = None
         # How long replies take beyond their wire time: smoothed mean and mean deviation.
         self._answer_s = 0.0
@@ -174,8 +181,10 @@ class Link:
         return await self.receive(exchange)
 
     async def _read_until(self, exchange: Exchange, deadline: float) -> Reply | None:
+        if self._read_frame is not None:
+            return await self._read_frames(self._read_frame, exchange, deadline)
         framer, transport, clock = self._framer, self.transport, self.clock
-        gap_s = self.plan.gap_s
+        gap_s = self.gap_s
         last_rx = clock.now()
         while True:
             read_deadline = min(deadline, last_rx + gap_s) if framer.buffered else deadline
@@ -194,35 +203,64 @@ class Link:
             if reply is not None:
                 return reply
 
+    async def _read_frames(
+        self, read_frame: ReadFrame, exchange: Exchange, deadline: float
+    ) -> Reply | None:
+        """The same on a transport that frames in its reader callback: one wake-up a piece."""
+        framer, transport, clock, gap_s = self._framer, self.transport, self.clock, self.gap_s
+        while True:
+            piece = await read_frame(framer, deadline, gap_s)
+            if piece is None:
+                # A gap (or the deadline): an unfinished frame will not be completed.
+                framer.reset()
+                reply = self._drain(exchange)
+                if reply is not None or clock.now() >= deadline:
+                    return reply
+                continue
+            self._arrived = transport.received_at
+            reply = self._take(exchange, piece)
+            if reply is None:
+                reply = self._drain(exchange)
+            if reply is not None:
+                return reply
+
     def _drain(self, exchange: Exchange) -> Reply | None:
         """Hand the framer's pieces to the codec until one answers ``exchange``."""
-        stats, framer = self.stats, self._framer
+        framer = self._framer
         while (piece := framer.next_frame()) is not None:
-            if isinstance(piece, Frame):
-                try:
-                    reply = self.codec.parse(exchange, piece.data)
-                except UnexpectedReply:
-                    stats.unexpected += 1
-                    self._record("unexpected", piece.data)
-                    if self._suspect is not None:
-                        # Likely the previous request's reply, later than even the drain
-                        # allowed for (a device server's network, a busy host): count how
-                        # late, or every reply would go on missing its deadline by one.
-                        sent_at, wire = self._suspect
-                        self._timed(self.transport.received_at - sent_at - wire)
-                        self._suspect = None
-                    continue
-                except (MalformedReply, ProtocolError):
-                    stats.malformed += 1
-                    self._record("malformed", piece.data)
-                    continue
-                self._record("rx", piece.data)
-                self._discard_rest()
+            reply = self._take(exchange, piece)
+            if reply is not None:
                 return reply
-            stats.noise_bytes += len(piece.data)
-            if piece.reason is SkipReason.CHECKSUM:
-                stats.checksum_errors += 1
-            self._record(str(piece.reason), piece.data)
+        return None
+
+    def _take(self, exchange: Exchange, piece: Frame | Skipped) -> Reply | None:
+        """One piece: the reply to ``exchange``, or counted (and None)."""
+        stats = self.stats
+        if isinstance(piece, Frame):
+            try:
+                reply = self.codec.parse(exchange, piece.data)
+            except UnexpectedReply:
+                stats.unexpected += 1
+                self._record("unexpected", piece.data)
+                if self._suspect is not None:
+                    # Likely the previous request's reply, later than even the drain
+                    # allowed for (a device server's network, a busy host): count how
+                    # late, or every reply would go on missing its deadline by one.
+                    sent_at, wire = self._suspect
+                    self._timed(self.transport.received_at - sent_at - wire)
+                    self._suspect = None
+                return None
+            except (MalformedReply, ProtocolError):
+                stats.malformed += 1
+                self._record("malformed", piece.data)
+                return None
+            self._record("rx", piece.data)
+            self._discard_rest()
+            return reply
+        stats.noise_bytes += len(piece.data)
+        if piece.reason is SkipReason.CHECKSUM:
+            stats.checksum_errors += 1
+        self._record(str(piece.reason), piece.data)
         return None
 
     def _discard_rest(self) -> None:
