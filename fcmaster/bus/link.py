@@ -66,7 +66,6 @@ class Link:
         self.replied_at = 0.0  # when the last byte of the last reply arrived
         self._arrived = 0.0
         self._framer = codec.new_framer()
-        self.gap_s = plan.gap_s
         # Transports that can frame as bytes arrive wake the Link once per reply.
         self._read_frame: ReadFrame | None = getattr(transport, "read_frame", None)
         self._replied_at: float | None = None
@@ -76,6 +75,22 @@ class Link:
         self._answers = 0
         self._missed: tuple[float, float] | None = None  # the last request timed out: when, wire
         self._suspect: tuple[float, float] | None = None  # the one before, its reply not seen
+
+    @property
+    def gap_s(self) -> float:
+        """An inter-character gap this long ends an unfinished frame.
+
+        The plan's, widened by a USB adapter's latency timer where the transport knows it
+        (``SerialTransport.adapter``, read from sysfs when the port opened): the adapter
+        sends what it holds at each tick, so a reply that spans a tick reaches the host in
+        two chunks up to a tick apart, and a gap shorter than that would cut it in two (its
+        halves counted as noise, the poll as a timeout). The plan's gap still follows.
+        """
+        adapter = getattr(self.transport, "adapter", None)
+        latency_ms: int | None = adapter.latency_ms if adapter is not None else None
+        if not latency_ms:
+            return self.plan.gap_s
+        return latency_ms / 1000 + self.plan.gap_s
 
     def deadline_s(self, request_length: int, reply_length: int) -> float:
         """Seconds from writing a request to giving up on its reply."""
@@ -158,7 +173,7 @@ class Link:
             self._record("timeout", b"")
             self._missed = (written_at, plan.wire_s(request_length + reply_length))
             # Let a late reply finish arriving, so it is discarded, not misattributed.
-            self.ready_at = clock.now() + plan.wire_s(exchange.reply_length) + plan.gap_s
+            self.ready_at = clock.now() + plan.wire_s(exchange.reply_length) + self.gap_s
         else:
             # The pause runs from the reply's arrival, so decoding it, the planner's update
             # and the next request's encoding all happen inside the pause.
