@@ -61,6 +61,9 @@ class Link:
         self.stats = stats or LineStats()
         self._recorder: deque[tuple[str, bytes]] = deque(maxlen=32)  # flight recorder
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
+        # The plan's figures, worked out once: every transaction needs them.
+        self._char_bits, self._baudrate = plan.char_bits, plan.baudrate
+        self._plan_gap_s = plan.gap_s
         self.written_at = 0.0  # when the last request was written
         self.ready_at = 0.0  # when the next request may go (pause, drain or broadcast wait)
         self.replied_at = 0.0  # when the last byte of the last reply arrived
@@ -89,21 +92,32 @@ class Link:
         adapter = getattr(self.transport, "adapter", None)
         latency_ms: int | None = adapter.latency_ms if adapter is not None else None
         if not latency_ms:
-            return self.plan.gap_s
-        return latency_ms / 1000 + self.plan.gap_s
+            return self._plan_gap_s
+        return latency_ms / 1000 + self._plan_gap_s
+
+    def _wire_s(self, length: int) -> float:
+        """``plan.wire_s(length)``, without its property calls."""
+        return length * self._char_bits / self._baudrate
+
+    def _reply_timeout(self, request_length: int, reply_length: int) -> float:
+        """``plan.reply_timeout``, the same sum, without its property calls."""
+        plan = self.plan
+        if plan.timeout_s is not None:
+            return plan.timeout_s
+        return self._wire_s(request_length + reply_length) + plan.response_delay_s + 0.050
 
     def deadline_s(self, request_length: int, reply_length: int) -> float:
         """Seconds from writing a request to giving up on its reply."""
         plan = self.plan
-        fixed = plan.reply_timeout(request_length, reply_length)
+        fixed = self._reply_timeout(request_length, reply_length)
         if plan.timeout_s is not None or self._answers < ANSWER_SAMPLES:
             return fixed
-        wire = plan.wire_s(request_length + reply_length)
+        wire = self._wire_s(request_length + reply_length)
         answer = max(plan.response_delay_s, self._answer_s)
         # The margin is at least the answer time itself: a host's scheduling hiccup or an
         # adapter's latency timer can delay a reply by that much without the spread having
         # shown it yet.
-        margin = max(4.0 * self._answer_dev_s, self._answer_s, plan.gap_s)
+        margin = max(4.0 * self._answer_dev_s, self._answer_s, self._plan_gap_s)
         return min(fixed, wire + answer + margin)
 
     def _timed(self, answer_s: float) -> None:
@@ -166,7 +180,7 @@ class Link:
         if adaptive:
             deadline = written_at + self.deadline_s(request_length, reply_length)
         else:
-            deadline = written_at + plan.reply_timeout(request_length, reply_length)
+            deadline = written_at + self._reply_timeout(request_length, reply_length)
         reply = await self._read_until(exchange, deadline)
         if reply is None:
             stats.timeouts += 1
@@ -180,9 +194,7 @@ class Link:
             arrived = self.replied_at = max(self._arrived, written_at)
             stats.replies += 1
             stats.latency.observe(arrived - written_at)
-            self._timed(
-                arrived - written_at - plan.wire_s(len(exchange.request) + exchange.reply_length)
-            )
+            self._timed(arrived - written_at - self._wire_s(request_length + reply_length))
             self._replied_at = arrived
             self.ready_at = arrived + self.pause_s
         stats.busy_s += self.ready_at - written_at
