@@ -25,7 +25,6 @@ read, write, control) drive one directly.
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Awaitable, Callable
 
 from fcmaster.bus.plan import LinePlan
@@ -37,6 +36,7 @@ from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
 from fcmaster.protocol.framing import Frame, Framer, Skipped, SkipReason
 
 ANSWER_SAMPLES = 8  # replies timed before deadlines follow the line
+RECORDED = 32  # frames and events the flight recorder keeps
 
 # A transport that feeds the framer in its reader callback (SerialTransport.read_frame).
 ReadFrame = Callable[[Framer, float, float], Awaitable[Frame | Skipped | None]]
@@ -59,7 +59,11 @@ class Link:
         self.transport = transport
         self.clock = clock
         self.stats = stats or LineStats()
-        self._recorder: deque[tuple[str, bytes]] = deque(maxlen=32)  # flight recorder
+        # The flight recorder: the last RECORDED frames and events, in two rings written in
+        # place, so a transaction leaves no object of its own behind (not even a tuple).
+        self._kinds: list[str] = [""] * RECORDED
+        self._data: list[bytes] = [b""] * RECORDED
+        self._recorded = 0
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
         # The plan's figures, worked out once: every transaction needs them.
         self._char_bits, self._baudrate = plan.char_bits, plan.baudrate
@@ -156,7 +160,7 @@ class Link:
             stats.turnaround.observe(max(0.0, written_at - self._replied_at - self.pause_s))
             self._replied_at = None
         await self.transport.write(exchange.request)
-        self._recorder.append(("tx", exchange.request))
+        self._record("tx", exchange.request)
         stats.requests += 1
         if not exchange.expects_reply:
             # Broadcasts and resets get no answer: give the drives time to act on them.
@@ -298,8 +302,14 @@ class Link:
             self.stats.late_bytes += len(piece.data)
 
     def _record(self, kind: str, data: bytes) -> None:
-        self._recorder.append((kind, data))
+        at = self._recorded % RECORDED
+        self._kinds[at], self._data[at] = kind, data
+        self._recorded += 1
 
     def recent_frames(self) -> list[str]:
         """The last frames and events on the line, oldest first, for warnings and errors."""
-        return [f"{kind} {data.hex(' ')}".rstrip() for kind, data in self._recorder]
+        kinds, data, recorded = self._kinds, self._data, self._recorded
+        return [
+            f"{kinds[i % RECORDED]} {data[i % RECORDED].hex(' ')}".rstrip()
+            for i in range(max(0, recorded - RECORDED), recorded)
+        ]
