@@ -109,6 +109,7 @@ from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock, lower_timer_slack, new_event_loop
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
+from fcmaster.protocol.framing import Framer
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
 
 REQUEST_LENGTH: Final = 16  # FC parameter telegram, both ways
@@ -284,6 +285,12 @@ class TapTransport:
         data = await self.inner.read(deadline)
         self.reads.append(self.inner.received_at)  # when the bytes reached the port
         return data
+
+    async def read_frame(self, framer: Framer, deadline: float, gap_s: float) -> Any:
+        piece = await self.inner.read_frame(framer, deadline, gap_s)
+        if piece is not None:
+            self.reads.append(self.inner.received_at)  # when the bytes reached the port
+        return piece
 
     @property
     def received_at(self) -> float:

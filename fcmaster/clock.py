@@ -47,10 +47,12 @@ class MonotonicClock:
     microseconds on bare metal under the precise loop, a few hundred in a busy VM), so the
     clock learns how late its wake-ups come (a running average), asks to be woken that
     much sooner, and spins through the rest. Spinning holds the event loop and burns CPU,
-    so the lead is capped (``max_lead_s``): by default a wait spins at most 0.1 ms; a
-    simulator, whose job is to keep time and whose CPU is nobody's budget, may allow more.
-    A wait no longer than :attr:`SPIN_S` is spun whole: it ends on time, and costs less
-    CPU than a wake-up from sleep. Only waits shorter than :attr:`LEARN_BELOW_S` teach the
+    so the lead is capped (``max_lead_s``): by default a wait spins at most :attr:`SPIN_S`
+    (0.1 ms); a simulator, whose job is to keep time and whose CPU is nobody's budget, may
+    allow more. Only the stretch the clock expects the kernel to be late by is spun: a wait
+    longer than that sleeps first, however short (a spin of the whole 0.1 ms costs more CPU
+    than the wake-up it saves), and a wait that has already passed returns at once, without
+    a turn of the loop. Only waits shorter than :attr:`LEARN_BELOW_S` teach the
     clock: the kernel lets a long wait run late by a share of its length (0.1 %), and a
     reconnect backoff of seconds needs no microseconds anyway.
 
@@ -69,7 +71,7 @@ class MonotonicClock:
     LEARN_BELOW_S: ClassVar[float] = 0.05
     _LEARNING_RATE: ClassVar[float] = 0.125
 
-    def __init__(self, *, max_lead_s: float = 0.0001) -> None:
+    def __init__(self, *, max_lead_s: float = SPIN_S) -> None:
         self.max_lead_s = max_lead_s
         self._early = 0.0  # how much sooner than the deadline to ask to be woken
 
@@ -89,7 +91,7 @@ class MonotonicClock:
         if delay > self.SPLIT_S:
             await asyncio.sleep(delay - max(0.001, delay * 0.01))
             delay = wake_at - time.monotonic()
-        if delay > 0 and delay + early > self.SPIN_S:
+        if delay > 0:  # longer than the kernel's expected lateness: sleep, then spin the rest
             await asyncio.sleep(delay)
             if delay < self.LEARN_BELOW_S:
                 late = min(time.monotonic() - wake_at, self.max_lead_s)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from typing import Any
 
 from fcmaster.bus.transport import Transport
 from fcmaster.errors import ReplyTimeout
@@ -74,6 +75,11 @@ class EchoCancellingTransport:
     def received_at(self) -> float:
         """When the wrapped transport last delivered bytes."""
         return self._inner.received_at
+
+    @property
+    def adapter(self) -> Any:
+        """The USB adapter behind the port, if the inner transport knows it (its latency)."""
+        return getattr(self._inner, "adapter", None)
 
     def discard_input(self) -> bytes:
         """Drop unread input; an echo still expected is dropped with it."""

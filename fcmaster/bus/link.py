@@ -25,7 +25,7 @@ read, write, control) drive one directly.
 
 from __future__ import annotations
 
-from collections import deque
+from collections.abc import Awaitable, Callable
 
 from fcmaster.bus.frame_log import RX, TX, FrameLog
 from fcmaster.bus.plan import LinePlan
@@ -34,9 +34,13 @@ from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock
 from fcmaster.errors import MalformedReply, ProtocolError, ReplyTimeout, UnexpectedReply
 from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
-from fcmaster.protocol.framing import Frame, SkipReason
+from fcmaster.protocol.framing import Frame, Framer, Skipped, SkipReason
 
 ANSWER_SAMPLES = 8  # replies timed before deadlines follow the line
+RECORDED = 32  # frames and events the flight recorder keeps
+
+# A transport that feeds the framer in its reader callback (SerialTransport.read_frame).
+ReadFrame = Callable[[Framer, float, float], Awaitable[Frame | Skipped | None]]
 
 
 class Link:
@@ -56,14 +60,23 @@ class Link:
         self.transport = transport
         self.clock = clock
         self.stats = stats or LineStats()
-        self._recorder: deque[tuple[str, bytes]] = deque(maxlen=32)  # flight recorder
+        # The flight recorder: the last RECORDED frames and events, in two rings written in
+        # place, so a transaction leaves no object of its own behind (not even a tuple).
+        self._kinds: list[str] = [""] * RECORDED
+        self._data: list[bytes] = [b""] * RECORDED
+        self._recorded = 0
         self.frames = FrameLog()  # the frames with their times, for captures
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
+        # The plan's figures, worked out once: every transaction needs them.
+        self._char_bits, self._baudrate = plan.char_bits, plan.baudrate
+        self._plan_gap_s = plan.gap_s
         self.written_at = 0.0  # when the last request was written
         self.ready_at = 0.0  # when the next request may go (pause, drain or broadcast wait)
         self.replied_at = 0.0  # when the last byte of the last reply arrived
         self._arrived = 0.0
         self._framer = codec.new_framer()
+        # Transports that can frame as bytes arrive wake the Link once per reply.
+        self._read_frame: ReadFrame | None = getattr(transport, "read_frame", None)
         self._replied_at: float | None = None
         # How long replies take beyond their wire time: smoothed mean and mean deviation.
         self._answer_s = 0.0
@@ -72,18 +85,45 @@ class Link:
         self._missed: tuple[float, float] | None = None  # the last request timed out: when, wire
         self._suspect: tuple[float, float] | None = None  # the one before, its reply not seen
 
+    @property
+    def gap_s(self) -> float:
+        """An inter-character gap this long ends an unfinished frame.
+
+        The plan's, widened by a USB adapter's latency timer where the transport knows it
+        (``SerialTransport.adapter``, read from sysfs when the port opened): the adapter
+        sends what it holds at each tick, so a reply that spans a tick reaches the host in
+        two chunks up to a tick apart, and a gap shorter than that would cut it in two (its
+        halves counted as noise, the poll as a timeout). The plan's gap still follows.
+        """
+        adapter = getattr(self.transport, "adapter", None)
+        latency_ms: int | None = adapter.latency_ms if adapter is not None else None
+        if not latency_ms:
+            return self._plan_gap_s
+        return latency_ms / 1000 + self._plan_gap_s
+
+    def _wire_s(self, length: int) -> float:
+        """``plan.wire_s(length)``, without its property calls."""
+        return length * self._char_bits / self._baudrate
+
+    def _reply_timeout(self, request_length: int, reply_length: int) -> float:
+        """``plan.reply_timeout``, the same sum, without its property calls."""
+        plan = self.plan
+        if plan.timeout_s is not None:
+            return plan.timeout_s
+        return self._wire_s(request_length + reply_length) + plan.response_delay_s + 0.050
+
     def deadline_s(self, request_length: int, reply_length: int) -> float:
         """Seconds from writing a request to giving up on its reply."""
         plan = self.plan
-        fixed = plan.reply_timeout(request_length, reply_length)
+        fixed = self._reply_timeout(request_length, reply_length)
         if plan.timeout_s is not None or self._answers < ANSWER_SAMPLES:
             return fixed
-        wire = plan.wire_s(request_length + reply_length)
+        wire = self._wire_s(request_length + reply_length)
         answer = max(plan.response_delay_s, self._answer_s)
         # The margin is at least the answer time itself: a host's scheduling hiccup or an
         # adapter's latency timer can delay a reply by that much without the spread having
         # shown it yet.
-        margin = max(4.0 * self._answer_dev_s, self._answer_s, plan.gap_s)
+        margin = max(4.0 * self._answer_dev_s, self._answer_s, self._plan_gap_s)
         return min(fixed, wire + answer + margin)
 
     def _timed(self, answer_s: float) -> None:
@@ -123,7 +163,7 @@ class Link:
             stats.turnaround.observe(max(0.0, written_at - self._replied_at - self.pause_s))
             self._replied_at = None
         await self.transport.write(exchange.request)
-        self._recorder.append(("tx", exchange.request))
+        self._record("tx", exchange.request)
         self.frames.add(TX, exchange.request, written_at)
         stats.requests += 1
         if not exchange.expects_reply:
@@ -148,23 +188,21 @@ class Link:
         if adaptive:
             deadline = written_at + self.deadline_s(request_length, reply_length)
         else:
-            deadline = written_at + plan.reply_timeout(request_length, reply_length)
+            deadline = written_at + self._reply_timeout(request_length, reply_length)
         reply = await self._read_until(exchange, deadline)
         if reply is None:
             stats.timeouts += 1
             self._record("timeout", b"")
             self._missed = (written_at, plan.wire_s(request_length + reply_length))
             # Let a late reply finish arriving, so it is discarded, not misattributed.
-            self.ready_at = clock.now() + plan.wire_s(exchange.reply_length) + plan.gap_s
+            self.ready_at = clock.now() + plan.wire_s(exchange.reply_length) + self.gap_s
         else:
             # The pause runs from the reply's arrival, so decoding it, the planner's update
             # and the next request's encoding all happen inside the pause.
             arrived = self.replied_at = max(self._arrived, written_at)
             stats.replies += 1
             stats.latency.observe(arrived - written_at)
-            self._timed(
-                arrived - written_at - plan.wire_s(len(exchange.request) + exchange.reply_length)
-            )
+            self._timed(arrived - written_at - self._wire_s(request_length + reply_length))
             self._replied_at = arrived
             self.ready_at = arrived + self.pause_s
         stats.busy_s += self.ready_at - written_at
@@ -178,8 +216,10 @@ class Link:
         return await self.receive(exchange)
 
     async def _read_until(self, exchange: Exchange, deadline: float) -> Reply | None:
+        if self._read_frame is not None:
+            return await self._read_frames(self._read_frame, exchange, deadline)
         framer, transport, clock = self._framer, self.transport, self.clock
-        gap_s = self.plan.gap_s
+        gap_s = self.gap_s
         last_rx = clock.now()
         while True:
             read_deadline = min(deadline, last_rx + gap_s) if framer.buffered else deadline
@@ -198,36 +238,65 @@ class Link:
             if reply is not None:
                 return reply
 
+    async def _read_frames(
+        self, read_frame: ReadFrame, exchange: Exchange, deadline: float
+    ) -> Reply | None:
+        """The same on a transport that frames in its reader callback: one wake-up a piece."""
+        framer, transport, clock, gap_s = self._framer, self.transport, self.clock, self.gap_s
+        while True:
+            piece = await read_frame(framer, deadline, gap_s)
+            if piece is None:
+                # A gap (or the deadline): an unfinished frame will not be completed.
+                framer.reset()
+                reply = self._drain(exchange)
+                if reply is not None or clock.now() >= deadline:
+                    return reply
+                continue
+            self._arrived = transport.received_at
+            reply = self._take(exchange, piece)
+            if reply is None:
+                reply = self._drain(exchange)
+            if reply is not None:
+                return reply
+
     def _drain(self, exchange: Exchange) -> Reply | None:
         """Hand the framer's pieces to the codec until one answers ``exchange``."""
-        stats, framer = self.stats, self._framer
+        framer = self._framer
         while (piece := framer.next_frame()) is not None:
-            self.frames.add(RX, piece.data, self._arrived)
-            if isinstance(piece, Frame):
-                try:
-                    reply = self.codec.parse(exchange, piece.data)
-                except UnexpectedReply:
-                    stats.unexpected += 1
-                    self._record("unexpected", piece.data)
-                    if self._suspect is not None:
-                        # Likely the previous request's reply, later than even the drain
-                        # allowed for (a device server's network, a busy host): count how
-                        # late, or every reply would go on missing its deadline by one.
-                        sent_at, wire = self._suspect
-                        self._timed(self.transport.received_at - sent_at - wire)
-                        self._suspect = None
-                    continue
-                except (MalformedReply, ProtocolError):
-                    stats.malformed += 1
-                    self._record("malformed", piece.data)
-                    continue
-                self._record("rx", piece.data)
-                self._discard_rest()
+            reply = self._take(exchange, piece)
+            if reply is not None:
                 return reply
-            stats.noise_bytes += len(piece.data)
-            if piece.reason is SkipReason.CHECKSUM:
-                stats.checksum_errors += 1
-            self._record(str(piece.reason), piece.data)
+        return None
+
+    def _take(self, exchange: Exchange, piece: Frame | Skipped) -> Reply | None:
+        """One piece: the reply to ``exchange``, or counted (and None)."""
+        self.frames.add(RX, piece.data, self._arrived)
+        stats = self.stats
+        if isinstance(piece, Frame):
+            try:
+                reply = self.codec.parse(exchange, piece.data)
+            except UnexpectedReply:
+                stats.unexpected += 1
+                self._record("unexpected", piece.data)
+                if self._suspect is not None:
+                    # Likely the previous request's reply, later than even the drain
+                    # allowed for (a device server's network, a busy host): count how
+                    # late, or every reply would go on missing its deadline by one.
+                    sent_at, wire = self._suspect
+                    self._timed(self.transport.received_at - sent_at - wire)
+                    self._suspect = None
+                return None
+            except (MalformedReply, ProtocolError):
+                stats.malformed += 1
+                self._record("malformed", piece.data)
+                return None
+            self._record("rx", piece.data)
+            self._discard_rest()
+            return reply
+        stats.noise_bytes += len(piece.data)
+        if piece.reason is SkipReason.CHECKSUM:
+            stats.checksum_errors += 1
+        self._record(str(piece.reason), piece.data)
         return None
 
     def _discard_rest(self) -> None:
@@ -239,8 +308,14 @@ class Link:
             self.frames.add(RX, piece.data, self._arrived)
 
     def _record(self, kind: str, data: bytes) -> None:
-        self._recorder.append((kind, data))
+        at = self._recorded % RECORDED
+        self._kinds[at], self._data[at] = kind, data
+        self._recorded += 1
 
     def recent_frames(self) -> list[str]:
         """The last frames and events on the line, oldest first, for warnings and errors."""
-        return [f"{kind} {data.hex(' ')}".rstrip() for kind, data in self._recorder]
+        kinds, data, recorded = self._kinds, self._data, self._recorded
+        return [
+            f"{kinds[i % RECORDED]} {data[i % RECORDED].hex(' ')}".rstrip()
+            for i in range(max(0, recorded - RECORDED), recorded)
+        ]

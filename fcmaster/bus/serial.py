@@ -38,6 +38,7 @@ from fcmaster.bus.adapter import Adapter, tune
 from fcmaster.bus.open_errors import open_error
 from fcmaster.bus.portlock import in_use_message, lock_refused
 from fcmaster.errors import PortError, PortInUse, ReplyTimeout
+from fcmaster.protocol.framing import Frame, Framer, Skipped
 
 log = structlog.get_logger("fcmaster.bus")
 
@@ -55,13 +56,25 @@ def is_pty(port: str) -> bool:
 
 
 class _Receiver(asyncio.Protocol):
-    """Collects received bytes and wakes the one reader waiting for them."""
+    """Collects received bytes and wakes the one reader waiting for them.
+
+    A reader that hands over its framer (:meth:`SerialTransport.read_frame`) is woken only
+    when the framer holds a whole piece (a frame, or bytes it skipped), an inter-character
+    gap has passed, or the deadline: the chunks of one reply are fed to the framer right
+    here, in the reader callback, so a reply costs one wake-up however it was split.
+    """
+
+    __slots__ = ("buffer", "framer", "gap_s", "lost", "piece", "received_at", "timer", "waiter")
 
     def __init__(self) -> None:
         self.buffer = bytearray()
         self.waiter: asyncio.Future[None] | None = None
         self.lost: Exception | None = None
         self.received_at = 0.0
+        self.framer: Framer | None = None  # the waiting reader's, while it waits
+        self.piece: Frame | Skipped | None = None  # what the framer cut out for it
+        self.gap_s = 0.0
+        self.timer: asyncio.TimerHandle | None = None  # the deadline's or the gap's
 
     def data_received(self, data: bytes) -> None:
         self.arrived(data, time.monotonic())  # the loop's and MonotonicClock's timebase
@@ -69,13 +82,46 @@ class _Receiver(asyncio.Protocol):
     def arrived(self, data: bytes, at: float) -> None:
         """``data`` arrived at monotonic time ``at`` (seen first in another thread)."""
         self.received_at = at
-        self.buffer += data
+        framer = self.framer
+        if framer is None:
+            self.buffer += data
+            waiter = self.waiter
+            if waiter is not None and not waiter.done():
+                waiter.set_result(None)
+            return
+        framer.feed(data)
+        piece = framer.next_frame()
+        if piece is not None:
+            self.piece = piece
+            self._wake()
+        elif self.gap_s and framer.buffered:
+            # An unfinished frame: look again one gap after its last byte. The timer is
+            # moved only when it fires (see _on_gap), not for every chunk.
+            timer = self.timer
+            if timer is None or timer.when() > at + self.gap_s:
+                if timer is not None:
+                    timer.cancel()
+                self.timer = asyncio.get_running_loop().call_at(at + self.gap_s, self.on_gap)
+
+    def on_gap(self) -> None:
+        """The gap timer fired: wake the reader unless bytes came since it was set."""
+        due = self.received_at + self.gap_s
+        loop = asyncio.get_running_loop()
+        if due > loop.time() and self.waiter is not None:
+            self.timer = loop.call_at(due, self.on_gap)
+            return
+        self.timer = None
+        self._wake()
+
+    def _wake(self) -> None:
+        self.framer = None  # later bytes wait in the buffer
         waiter = self.waiter
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
 
     def connection_lost(self, exc: Exception | None) -> None:
         self.lost = exc or ConnectionError("port closed")
+        self.framer = None
         waiter = self.waiter
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
@@ -406,6 +452,46 @@ class SerialTransport:
         data = bytes(receiver.buffer)
         receiver.buffer.clear()
         return data
+
+    async def read_frame(
+        self, framer: Framer, deadline: float, gap_s: float
+    ) -> Frame | Skipped | None:
+        """The next piece ``framer`` cuts from the bytes received, waiting until ``deadline``.
+
+        None: the deadline passed, or a gap of ``gap_s`` followed an unfinished frame (the
+        caller tells them apart by the time). The bytes are fed to ``framer`` as they
+        arrive, in the reader callback, and the caller is woken once, when a piece is whole:
+        not for every chunk as :meth:`read` would. :attr:`received_at` is the arrival of
+        the bytes that completed the piece.
+        """
+        receiver = self._receiver
+        if receiver.buffer:
+            framer.feed(bytes(receiver.buffer))
+            receiver.buffer.clear()
+        piece = framer.next_frame()
+        if piece is not None:
+            return piece
+        if receiver.lost is not None:
+            raise PortError(f"{self.port} was lost: {receiver.lost}")
+        loop = asyncio.get_running_loop()
+        waiter: asyncio.Future[None] = loop.create_future()
+        receiver.waiter, receiver.framer, receiver.piece = waiter, framer, None
+        receiver.gap_s = gap_s
+        if framer.buffered:  # a frame begun in an earlier read: the gap runs from its bytes
+            deadline = min(deadline, receiver.received_at + gap_s)
+        timer = loop.call_at(deadline, _expire, waiter)
+        try:
+            await waiter
+        finally:
+            timer.cancel()
+            if receiver.timer is not None:
+                receiver.timer.cancel()
+                receiver.timer = None
+            receiver.waiter = receiver.framer = None
+        piece, receiver.piece = receiver.piece, None
+        if piece is None and receiver.lost is not None:
+            raise PortError(f"{self.port} was lost: {receiver.lost}")
+        return piece
 
     @property
     def received_at(self) -> float:

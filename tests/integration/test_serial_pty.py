@@ -11,6 +11,8 @@ import pytest
 from fcmaster.bus.serial import SerialTransport, is_pty
 from fcmaster.clock import MonotonicClock
 from fcmaster.errors import PortError, ReplyTimeout
+from fcmaster.protocol.danfoss_fc.framer import FcFramer
+from fcmaster.protocol.framing import Frame, Skipped, SkipReason
 from tests.integration.waiting import wait_for
 
 
@@ -66,6 +68,63 @@ async def test_bytes_are_stamped_when_they_arrive_not_when_they_are_read(
         read_at = clock.now()
         assert await transport.read(read_at + 1.0) == b"\x02\x06\x81"
         assert sent_at <= transport.received_at < read_at
+    finally:
+        await transport.close()
+
+
+# A process-data reply from drive 1 (status 0x0F07, main actual value 0x2000), BCC 0xAD.
+FC_REPLY = b"\x02\x06\x81\x0f\x07\x20\x00\xad"
+
+
+async def test_a_frame_read_is_fed_in_the_callback_and_wakes_once_when_whole(
+    pty_pair: tuple[int, str],
+) -> None:
+    # A reply split in chunks (a UART's FIFO, a USB adapter's batches) is fed to the
+    # framer as it arrives; the reader resumes once, with the whole frame, stamped with the
+    # arrival of the chunk that completed it.
+    controller, path = pty_pair
+    transport = SerialTransport(path, baudrate=19200)
+    await transport.open()
+    clock = MonotonicClock()
+    framer = FcFramer()
+    try:
+        reader = asyncio.create_task(transport.read_frame(framer, clock.now() + 5.0, 1.0))
+        await asyncio.sleep(0.01)
+        os.write(controller, FC_REPLY[:3])
+        await wait_for(lambda: framer.buffered == 3, timeout_s=5.0)
+        os.write(controller, FC_REPLY[3:5])
+        await wait_for(lambda: framer.buffered == 5, timeout_s=5.0)
+        assert not reader.done()  # fed, not woken
+        last_sent_at = clock.now()
+        os.write(controller, FC_REPLY[5:])
+        async with asyncio.timeout(5):
+            piece = await reader
+        assert piece == Frame(FC_REPLY)
+        assert transport.received_at >= last_sent_at
+        assert framer.buffered == 0
+    finally:
+        await transport.close()
+
+
+async def test_a_frame_read_ends_at_a_gap_after_an_unfinished_frame(
+    pty_pair: tuple[int, str],
+) -> None:
+    controller, path = pty_pair
+    transport = SerialTransport(path, baudrate=19200)
+    await transport.open()
+    clock = MonotonicClock()
+    framer = FcFramer()
+    try:
+        deadline = clock.now() + 5.0
+        os.write(controller, FC_REPLY[:4])
+        async with asyncio.timeout(5):
+            piece = await transport.read_frame(framer, deadline, 0.05)
+        # Not the deadline: the gap after the half frame ended the read.
+        assert piece is None
+        assert clock.now() < deadline
+        assert clock.now() >= transport.received_at + 0.05
+        framer.reset()
+        assert framer.next_frame() == Skipped(FC_REPLY[:1], SkipReason.GAP)
     finally:
         await transport.close()
 

@@ -59,6 +59,7 @@ from fcmaster.protocol.danfoss_fc.words import (
     decode_warning_word_2,
 )
 from fcmaster.protocol.drive import ControlIntent
+from fcmaster.protocol.polls import PollCache
 
 # Plain ints: a reply is decoded on every transaction, and masking an int with an IntFlag
 # member builds a new flag object each time.
@@ -114,6 +115,7 @@ class FcCodec:
     def __init__(self, address_format: AddressFormat = AddressFormat.FORMAT_126) -> None:
         self.address_format = address_format
         self.addresses = range(1, 127 if address_format is AddressFormat.FORMAT_126 else 32)
+        self._polls = PollCache(self._build_poll)
 
     def new_framer(self) -> FcFramer:
         """A framer for FC replies."""
@@ -142,7 +144,12 @@ class FcCodec:
     def poll(
         self, address: int, intent: ControlIntent | None, read: ParameterKey | None
     ) -> Exchange:
-        """A process telegram, or a parameter telegram reading ``read``."""
+        """A process telegram, or a parameter telegram reading ``read`` (built once)."""
+        return self._polls.get(address, intent, read)
+
+    def _build_poll(
+        self, address: int, intent: ControlIntent | None, read: ParameterKey | None
+    ) -> Exchange:
         if read is None:
             return self.control(address, intent)[0]
         return self._read(address, read, 0, intent)

@@ -68,6 +68,7 @@ from fcmaster.protocol.enc.parameters import (
     parse_parameter,
     split_code,
 )
+from fcmaster.protocol.polls import PollCache
 
 DEFAULT_NOMINAL_HZ: Final = 50.0
 MAX_FREQUENCY_HZ: Final = 0xFFFF / 100  # the data area holds 0.01 Hz steps (§4.2)
@@ -116,6 +117,7 @@ class EncCodec:
         self.nominal_hz = dict(nominal_hz or {})
         hex_addresses = self.address_encoding is NumberEncoding.HEX
         self.addresses = range(1, BROADCAST if hex_addresses else 100)
+        self._polls = PollCache(self._build_poll)
 
     def new_framer(self) -> EncFramer:
         """A framer for ENC replies."""
@@ -154,7 +156,15 @@ class EncCodec:
     def poll(
         self, address: int, intent: ControlIntent | None, read: ParameterKey | None
     ) -> Exchange:
-        """Read the state word (``read`` None) or ``read``; ENC polls never command."""
+        """Read the state word (``read`` None) or ``read``; ENC polls never command.
+
+        Built once per address and ``read``.
+        """
+        return self._polls.get(address, None, read)
+
+    def _build_poll(
+        self, address: int, intent: ControlIntent | None, read: ParameterKey | None
+    ) -> Exchange:
         if read is None:
             request = Request(
                 address=self._address(address), command=Command.READ_VALUE, cmd_index=0x0F

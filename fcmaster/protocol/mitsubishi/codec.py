@@ -87,6 +87,7 @@ from fcmaster.protocol.mitsubishi.profile import (
     frequency_raw,
     run_command,
 )
+from fcmaster.protocol.polls import PollCache
 
 DEFAULT_WAIT_MS: Final = 0  # the digit sent by default (§7: rely on our own turnaround)
 TURNAROUND_S: Final = 0.010  # §2 step 4: 10 ms or more before the next request
@@ -132,6 +133,7 @@ class MitsubishiCodec:
         self.wait_time_ms = wait_time_ms
         self.nominal_hz = dict(nominal_hz or {})
         self._faulted: dict[int, bool] = {}
+        self._polls = PollCache(self._build_poll)
 
     def new_framer(self) -> MitsubishiFramer:
         """A framer for replies on this line."""
@@ -175,7 +177,15 @@ class MitsubishiCodec:
     def poll(
         self, address: int, intent: ControlIntent | None, read: ParameterKey | None
     ) -> Exchange:
-        """A status read, or a read of ``read``; never a command (``intent`` is not sent)."""
+        """A status read, or a read of ``read``; never a command (``intent`` is not sent).
+
+        Built once per address and ``read``.
+        """
+        return self._polls.get(address, None, read)
+
+    def _build_poll(
+        self, address: int, intent: ControlIntent | None, read: ParameterKey | None
+    ) -> Exchange:
         if read is None:
             return self._exchange(address, STATUS.code, None, 0, widths=(STATUS.digits,))
         exchanges = self.read(address, read, 0, None)
