@@ -67,8 +67,6 @@ class Link:
         self._recorded = 0
         self.frames = FrameLog()  # the frames with their times, for captures
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
-        # The plan's figures, worked out once: every transaction needs them.
-        self._char_bits, self._baudrate = plan.char_bits, plan.baudrate
         self._plan_gap_s = plan.gap_s
         self.written_at = 0.0  # when the last request was written
         self.ready_at = 0.0  # when the next request may go (pause, drain or broadcast wait)
@@ -101,24 +99,13 @@ class Link:
             return self._plan_gap_s
         return latency_ms / 1000 + self._plan_gap_s
 
-    def _wire_s(self, length: int) -> float:
-        """``plan.wire_s(length)``, without its property calls."""
-        return length * self._char_bits / self._baudrate
-
-    def _reply_timeout(self, request_length: int, reply_length: int) -> float:
-        """``plan.reply_timeout``, the same sum, without its property calls."""
-        plan = self.plan
-        if plan.timeout_s is not None:
-            return plan.timeout_s
-        return self._wire_s(request_length + reply_length) + plan.response_delay_s + 0.050
-
     def deadline_s(self, request_length: int, reply_length: int) -> float:
         """Seconds from writing a request to giving up on its reply."""
         plan = self.plan
-        fixed = self._reply_timeout(request_length, reply_length)
+        fixed = plan.reply_timeout(request_length, reply_length)
         if plan.timeout_s is not None or self._answers < ANSWER_SAMPLES:
             return fixed
-        wire = self._wire_s(request_length + reply_length)
+        wire = plan.wire_s(request_length + reply_length)
         answer = max(plan.response_delay_s, self._answer_s)
         # The margin is at least the answer time itself: a host's scheduling hiccup or an
         # adapter's latency timer can delay a reply by that much without the spread having
@@ -188,7 +175,7 @@ class Link:
         if adaptive:
             deadline = written_at + self.deadline_s(request_length, reply_length)
         else:
-            deadline = written_at + self._reply_timeout(request_length, reply_length)
+            deadline = written_at + plan.reply_timeout(request_length, reply_length)
         reply = await self._read_until(exchange, deadline)
         if reply is None:
             stats.timeouts += 1
@@ -202,7 +189,7 @@ class Link:
             arrived = self.replied_at = max(self._arrived, written_at)
             stats.replies += 1
             stats.latency.observe(arrived - written_at)
-            self._timed(arrived - written_at - self._wire_s(request_length + reply_length))
+            self._timed(arrived - written_at - plan.wire_s(request_length + reply_length))
             self._replied_at = arrived
             self.ready_at = arrived + self.pause_s
         stats.busy_s += self.ready_at - written_at
