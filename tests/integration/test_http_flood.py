@@ -84,10 +84,11 @@ async def test_idle_and_half_open_connections_make_room_for_an_operator_stop() -
         await asyncio.sleep(0.2)
         assert len(guard.open) == 30  # the ten half-open ones evicted the ten oldest idle
         assert all([await _closed_by_server(s, 5) for s in idle[:10]])
-        response, took_s = await _stop(adapter)
+        # How fast is benchmarks/http_flood.py's figure; here it must get through at all
+        # (the client's own 5 s timeout would fail the test).
+        response, _ = await _stop(adapter)
         assert response.status_code == 200, response.text
         assert response.json()["outcome"] == "done"
-        assert took_s < 1.0 * 3  # the figure is measured by the benchmark; slack for CI load
         assert [c.action.value for _, c in gateway.executed] == ["stop"]
         for sock in half:  # the youngest were left alone: the oldest idle ones made room
             assert not await _closed_by_server(sock, 0.1)
