@@ -317,7 +317,7 @@ class FleetState:
             changes["output_frequency_hz"] = round(
                 abs(reply.output_pct) * drive.nominal_frequency_hz / 100.0, 3
             )
-        value, read, measured = reply.value, None, None
+        value, report, read, measured = reply.value, reply.conditions, None, None
         monitored = self._monitored[key]
         if value is not None and (monitored is None or value.parameter.name in monitored):
             # A one-off read of anything else is its caller's answer, not a monitored value.
@@ -325,11 +325,9 @@ class FleetState:
             if value.index:
                 read = f"{read}[{value.index}]"
             texts = None
-            report = reply.conditions
             if report is not None and report.source == value.parameter.name:
                 texts = tuple(c.text for c in report.active)  # an alarm or warning word
             measured = Measured(value.value, value.unit, value.raw, value.title, read_at, texts)
-        report = reply.conditions
         if (
             all(getattr(old, field) == given for field, given in changes.items())
             and (measured is None or _same_reading(old.values.get(read or ""), measured))
