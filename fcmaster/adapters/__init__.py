@@ -4,7 +4,7 @@ Each adapter is a hub subscriber plus a command source, and reaches the lines on
 the :class:`~fcmaster.adapters.gateway.Gateway` the service hands it.
 """
 
-from fcmaster.adapters.commands import parse_command
+from fcmaster.adapters.command_json import parse_command
 from fcmaster.adapters.gateway import Gateway, LineInfo
 
 __all__ = ["Gateway", "LineInfo", "parse_command"]

@@ -29,7 +29,7 @@ from starlette.requests import ClientDisconnect
 from fcmaster import __version__
 from fcmaster.adapters import metrics
 from fcmaster.adapters.auth import Authenticator, AuthError, Principal, Role
-from fcmaster.adapters.commands import loads, parse_command, refusal
+from fcmaster.adapters.command_json import loads, parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.messages import event_json
 from fcmaster.adapters.middleware import (

@@ -12,7 +12,7 @@ from starlette.exceptions import HTTPException
 from starlette.responses import Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from fcmaster.adapters.commands import loads
+from fcmaster.adapters.command_json import loads
 from fcmaster.adapters.http_guard import RESERVE_KEY
 from fcmaster.adapters.messages import json_safe
 from fcmaster.state import DriveState

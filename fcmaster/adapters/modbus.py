@@ -44,7 +44,7 @@ from typing import Any, Final
 
 import structlog
 
-from fcmaster.adapters.commands import parse_command
+from fcmaster.adapters.command_json import parse_command
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.modbus_frames import (
     Broken,

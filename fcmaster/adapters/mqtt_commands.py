@@ -18,7 +18,7 @@ import aiomqtt
 import structlog
 
 from fcmaster.adapters.auth import Authenticator, AuthError, Role
-from fcmaster.adapters.commands import loads, parse_command, refusal
+from fcmaster.adapters.command_json import loads, parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.mqtt_outbox import Outbox
 from fcmaster.adapters.mqtt_topics import Topics, result_payload

@@ -5,7 +5,7 @@ from typing import Any
 
 import pytest
 
-from fcmaster.adapters.commands import BeyondLimits, loads, parse_command, refusal
+from fcmaster.adapters.command_json import BeyondLimits, loads, parse_command, refusal
 from fcmaster.bus.commands import Action, Outcome
 from fcmaster.bus.plan import DrivePlan
 from fcmaster.errors import UsageError
