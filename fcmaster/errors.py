@@ -6,18 +6,34 @@ its facts as attributes, not only in the message::
     FcmasterError
     ├── ConfigError            invalid YAML or settings, with the key path      (exit 2)
     ├── UsageError             a bad argument or value from the user             (exit 2)
+    │   └── BeyondLimits       a reference beyond the drive's limits  (adapters.command_json)
     ├── ProtocolError          a checked frame whose content we cannot accept
     │   ├── MalformedReply     fields out of range or inconsistent
-    │   └── UnexpectedReply    from the wrong address, or of the wrong kind
+    │   ├── UnexpectedReply    from the wrong address, or of the wrong kind
+    │   └── PcapngError        a capture file this reader cannot read      (protocol.pcapng)
     ├── BusError                                                                 (exit 1)
     │   ├── PortError          open/read/write failed (pyserial and OS errors mapped here)
     │   │   └── PortInUse      another program holds the port
     │   └── ReplyTimeout       no valid frame before the deadline
-    └── CommandError                                                             (exit 1)
-        ├── ControlNotAllowed  monitor-only drive, or a value beyond its configured limits
-        ├── DriveRejected      the drive refused, with its error code
-        ├── CommandTimedOut    no answer after the configured retries
-        └── CommandCancelled   the line shut down or was lost before the command ran
+    ├── CommandError                                                             (exit 1)
+    │   ├── ControlNotAllowed  monitor-only drive, or a value beyond its configured limits
+    │   ├── DriveRejected      the drive refused, with its error code
+    │   ├── CommandTimedOut    no answer after the configured retries
+    │   ├── CommandCancelled   the line shut down or was lost before the command ran
+    │   ├── CommandUnconfirmed acknowledged, but the status never showed the result
+    │   ├── CommandSuperseded  replaced by a newer command before it reached the wire
+    │   └── ReadFailed         a read of a parameter set ended neither done nor refused
+    │                                                          (adapters.parameter_sets)
+    ├── AuthError              a request without the token or role it needs, 401/403
+    │                                                                    (adapters.auth)
+    ├── ReadsBusy              too many viewer reads wait on a line, 429  (adapters.readlimit)
+    └── Refused                a simulated drive's refusal, answered on the wire as its
+                               vendor's error code (sim.danfoss_fc, sim.enc; private in
+                               sim.mitsubishi and in the Modbus server, adapters.modbus)
+
+The classes named with a module live there, beside the one place that raises them; the
+rest are here. ``tests/unit/test_errors.py`` checks that no exception class of the package
+stands outside this tree.
 
 Codecs raise only :class:`ProtocolError` (and :class:`UsageError` for requests that cannot
 be encoded); framers raise nothing. Foreign exceptions are translated at the boundary with

@@ -27,7 +27,7 @@ import ipaddress
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from fcmaster.errors import ConfigError
+from fcmaster.errors import ConfigError, FcmasterError
 
 DEFAULT_PORT = 8080
 
@@ -55,7 +55,7 @@ class Principal:
 ANONYMOUS = "anonymous"
 
 
-class AuthError(Exception):
+class AuthError(FcmasterError):
     """The request cannot be let through; ``status`` is 401 or 403."""
 
     def __init__(self, status: int, reason: str, *, actor: str = "-") -> None:

@@ -67,7 +67,7 @@ from fcmaster.adapters.modbus_map import (
 )
 from fcmaster.bus.commands import CommandResult
 from fcmaster.config import Config, ModbusModel, modbus_listen
-from fcmaster.errors import ConfigError, UsageError
+from fcmaster.errors import ConfigError, FcmasterError, UsageError
 
 log = structlog.get_logger("fcmaster.adapters.modbus")
 
@@ -90,7 +90,7 @@ EXCEPTION_OF: Final = {
 }
 
 
-class _Refused(Exception):
+class _Refused(FcmasterError):
     """A write answered with an exception before or instead of its command."""
 
     def __init__(self, code: ExceptionCode) -> None:

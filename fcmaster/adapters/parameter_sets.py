@@ -19,7 +19,7 @@ from typing import Any
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.readlimit import ReadsBusy
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
-from fcmaster.errors import UsageError
+from fcmaster.errors import CommandError, UsageError
 from fcmaster.protocol.codec import DriveError, ParameterValue
 from fcmaster.protocol.parameter_set import (
     ParameterSet,
@@ -30,7 +30,7 @@ from fcmaster.protocol.parameter_set import (
 )
 
 
-class ReadFailed(Exception):
+class ReadFailed(CommandError):
     """A read that ended neither done nor refused by the drive (offline, timeout, …)."""
 
     def __init__(self, parameter: str, result: CommandResult) -> None:

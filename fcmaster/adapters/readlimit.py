@@ -15,11 +15,13 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Final
 
+from fcmaster.errors import FcmasterError
+
 VIEWER_READ_GAP_S: Final = 0.5  # at most 2 viewer reads a second per line
 MAX_WAITING: Final = 32
 
 
-class ReadsBusy(Exception):
+class ReadsBusy(FcmasterError):
     """Too many viewer reads are already waiting on this line."""
 
 

@@ -30,6 +30,8 @@ import struct
 from dataclasses import dataclass, field
 from typing import Final
 
+from fcmaster.errors import ProtocolError
+
 LINK_TYPES: Final[dict[str, int]] = {"danfoss-fc": 147, "mitsubishi": 148, "enc": 149}
 PROTOCOLS: Final[dict[int, str]] = {code: name for name, code in LINK_TYPES.items()}
 
@@ -51,7 +53,7 @@ INBOUND: Final = 1  # epb_flags bits 0-1
 OUTBOUND: Final = 2
 
 
-class PcapngError(ValueError):
+class PcapngError(ProtocolError, ValueError):
     """The bytes are not a pcapng file this reader understands."""
 
 

@@ -36,7 +36,7 @@ from collections.abc import Callable
 from typing import Final
 
 from fcmaster.bus.plan import LinePlan
-from fcmaster.errors import UsageError
+from fcmaster.errors import FcmasterError, UsageError
 from fcmaster.protocol.mitsubishi.error_codes import (
     COUNTS_TOWARD_TRIP,
     DATA_RANGE_ERROR,
@@ -86,7 +86,7 @@ _CLEARS: Final = {0x9696: False, 0x9966: False, 0x5A5A: True, 0x55AA: True}  # k
 _SPECIAL_MONITORS: Final = frozenset((0x01, 0x02, 0x03, 0x05, 0x06, 0x08, 0x0D, 0x0E))
 
 
-class _Refused(Exception):
+class _Refused(FcmasterError):
     """A request the drive answers with NAK ``code``."""
 
     def __init__(self, code: int) -> None:
