@@ -13,30 +13,46 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Final
+from typing import Final, Protocol
 
 from fcmaster.protocol.danfoss_fc.profile import decode_reference
-from fcmaster.sim.motor import MotorRating
+from fcmaster.sim.danfoss_fc.control import FcControl
+from fcmaster.sim.danfoss_fc.parameters import ParameterStore
+from fcmaster.sim.motor import Motor, MotorRating
 
-if TYPE_CHECKING:
-    from fcmaster.sim.danfoss_fc.drive import FcSimDrive
+
+class Source(Protocol):
+    """What the readings read of a drive (an FcSimDrive), so they need not know the drive."""
+
+    @property
+    def control(self) -> FcControl:
+        """The drive's control logic: words, reference, alarm log."""
+
+    @property
+    def motor(self) -> Motor:
+        """The motor the drive turns."""
+
+    @property
+    def parameters(self) -> ParameterStore:
+        """The drive's parameter values."""
+
 
 _HP_PER_KW: Final = 1 / 0.7457
 _RAMPING: Final = 1 << 0  # 16-94 bits (§9)
 _OUT_OF_SPEED_RANGE: Final = 1 << 14
 
 
-def _log_entry(drive: FcSimDrive, index: int, field: int) -> float:
+def _log_entry(drive: Source, index: int, field: int) -> float:
     log = drive.control.alarm_log
     return log[index][field] if index < len(log) else 0.0
 
 
-def _ext_status(drive: FcSimDrive) -> int:
+def _ext_status(drive: Source) -> int:
     word = _RAMPING if drive.motor.is_ramping else 0
     return word | (_OUT_OF_SPEED_RANGE if drive.control.at_speed_limit else 0)
 
 
-Reading = Callable[["FcSimDrive", int], float]
+Reading = Callable[[Source, int], float]
 
 # PNU → value in the table's unit; ``index`` is the array index (0 for plain parameters).
 READINGS: Final[dict[int, Reading]] = {

@@ -14,17 +14,29 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Final
+from typing import Final, Protocol
 
 from fcmaster.protocol.enc.parameters import RUNNING_VALUES, StateWord
+from fcmaster.sim.enc.control import EncControl
+from fcmaster.sim.motor import Motor
 
-if TYPE_CHECKING:
-    from fcmaster.sim.enc.drive import EncSimDrive
+
+class Source(Protocol):
+    """What the readings read of a drive (an EncSimDrive), so they need not know the drive."""
+
+    @property
+    def control(self) -> EncControl:
+        """The drive's control logic: set frequency, direction, jogging, undervoltage."""
+
+    @property
+    def motor(self) -> Motor:
+        """The motor the drive turns."""
+
 
 EARLIER_RUNNING_H: Final = 1200.0
 
 
-def state_word(drive: EncSimDrive) -> int:
+def state_word(drive: Source) -> int:
     """The running state word (§6) for the drive's present state."""
     control, motor = drive.control, drive.motor
     word = StateWord(0)
@@ -39,7 +51,7 @@ def state_word(drive: EncSimDrive) -> int:
     return int(word)
 
 
-Reading = Callable[["EncSimDrive"], float]
+Reading = Callable[[Source], float]
 
 # command-11 index → value in the table's unit
 READINGS: Final[dict[int, Reading]] = {
@@ -62,7 +74,7 @@ READINGS: Final[dict[int, Reading]] = {
 }
 
 
-def raw_reading(drive: EncSimDrive, index: int) -> int:
+def raw_reading(drive: Source, index: int) -> int:
     """The raw data of running value ``index`` (KeyError if there is none)."""
     value = READINGS[index](drive)
     raw = RUNNING_VALUES[index][1].to_raw(max(value, 0.0))
