@@ -226,7 +226,6 @@ class FleetState:
         self._charted: dict[str, dict[str, Series]] = {}  # what each drive's history holds
         # what each drive's subscribers last saw, and when (monotonic)
         self._published: dict[str, tuple[DriveState, float]] = {}
-        self._plans: dict[str, DrivePlan] = {}
         self._sources: dict[str, dict[tuple[str, str], tuple[Condition, ...]]] = {}
         # the parameters each drive's values show: its monitor list and condition words
         self._monitored: dict[str, frozenset[str] | None] = {}
@@ -242,7 +241,6 @@ class FleetState:
                 self._states[state.key] = state
                 self._published[state.key] = (state, float("-inf"))
                 self._charted[state.key] = {_FREQUENCY.key: _FREQUENCY}
-                self._plans[state.key] = drive
                 self._sources[state.key] = {}
                 self._monitored[state.key] = _monitored(line, drive)
 

@@ -77,10 +77,6 @@ class Outbox:
         self._dirty[topic] = None
         self._ready.set()
 
-    def retained(self, topic: str) -> bytes | None:
-        """The latest payload filed for a retained topic."""
-        return self._retained.get(topic)
-
     def result(self, topic: str, payload: bytes) -> None:
         """A command's result; kept until acknowledged."""
         self._results.append(Outgoing(topic, payload, Kind.RESULT))

@@ -79,7 +79,6 @@ class WriteCommand(_Body):
 
 
 CommandUnion = MotionCommand | StartCommand | SetReferenceCommand | ReadCommand | WriteCommand
-CommandBody = Annotated[CommandUnion, Field(discriminator="action")]
 
 
 class ParameterWrite(_Body):

@@ -25,7 +25,6 @@ from websockets.exceptions import InvalidStatus, WebSocketException
 
 from fcmaster.errors import FcmasterError, UsageError
 
-DEFAULT_URL = "http://127.0.0.1:8080"
 _HOME, _CLEAR_LINE, _CLEAR_BELOW = "\x1b[H", "\x1b[K", "\x1b[J"
 _RED, _YELLOW, _GREEN, _DIM, _BOLD, _RESET = (
     "\x1b[31m",

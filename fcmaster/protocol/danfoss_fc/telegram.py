@@ -225,11 +225,6 @@ def decode_telegram(frame: bytes, *, from_drive: bool) -> Telegram:
     )  # fmt: skip
 
 
-def is_possible_lge(lge: int) -> bool:
-    """Whether an LGE byte can start a telegram (6, 14, or 10 + text length)."""
-    return lge == LGE_PROCESS or lge >= LGE_TEXT_BASE
-
-
 def _check_word(name: str, value: int) -> None:
     if not 0 <= value <= 0xFFFF:
         raise UsageError(f"{name} {value} does not fit in 16 bits")

@@ -41,7 +41,6 @@ from fcmaster.protocol.enc.parameters import (
 SERIAL_CHANNEL: Final = 3  # F0.00 / F0.02 option "serial port" (§1)
 BAUD_OPTIONS: Final = (1200, 2400, 4800, 9600, 19200, 38400)  # F2.14 units digit (§1)
 PARITY_OPTIONS: Final = {"N": 0, "E": 1, "O": 2}  # F2.14 tens digit, 1 stop bit (§1)
-DEFAULT_UPPER_LIMIT_HZ: Final = 50.0
 
 FREQUENCY_CHANNEL: Final = 0x0000  # F0.00
 DIGITAL_FREQUENCY: Final = 0x0001  # F0.01
