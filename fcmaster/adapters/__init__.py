@@ -4,7 +4,7 @@ Each adapter is a hub subscriber plus a command source, and reaches the lines on
 the :class:`~fcmaster.adapters.gateway.Gateway` the service hands it.
 """
 
-from fcmaster.adapters.command_json import parse_command
+from fcmaster.adapters.command_json import BeyondLimits, parse_command, refusal
 from fcmaster.adapters.gateway import Gateway, LineInfo
 
-__all__ = ["Gateway", "LineInfo", "parse_command"]
+__all__ = ["BeyondLimits", "Gateway", "LineInfo", "parse_command", "refusal"]

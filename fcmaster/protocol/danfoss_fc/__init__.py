@@ -1,5 +1,6 @@
 """The Danfoss FC protocol, sans-I/O (protocols/danfoss-fc.md)."""
 
+from fcmaster.protocol.danfoss_fc.codec import DEFAULT_MONITOR, FcCodec, decode_status
 from fcmaster.protocol.danfoss_fc.describe import describe_telegram
 from fcmaster.protocol.danfoss_fc.error_codes import ERROR_CODES, error_text
 from fcmaster.protocol.danfoss_fc.framer import FcFramer
@@ -40,12 +41,14 @@ from fcmaster.protocol.danfoss_fc.words import (
 )
 
 __all__ = [
+    "DEFAULT_MONITOR",
     "ERROR_CODES",
     "IGNORED_CONTROL_WORD",
     "PARAMETERS",
     "AddressFormat",
     "ControlWord",
     "DataType",
+    "FcCodec",
     "FcFramer",
     "ParameterSpec",
     "RequestAk",
@@ -59,6 +62,7 @@ __all__ = [
     "decode_alarm_word_2",
     "decode_ext_status_word",
     "decode_reference",
+    "decode_status",
     "decode_telegram",
     "decode_warning_word",
     "decode_warning_word_2",
