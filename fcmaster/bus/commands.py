@@ -1,6 +1,6 @@
 """Commands a caller puts to a drive, and the one result each of them gets.
 
-The same actions and outcomes serve every surface (Drive handle, CLI, HTTP, MQTT); their
+The same actions and outcomes serve every surface (CLI, HTTP, MQTT, Modbus); their
 names are the public ones of DESIGN.md.
 """
 

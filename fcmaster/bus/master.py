@@ -39,7 +39,7 @@ from typing import Protocol
 
 import structlog
 
-from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.bus.frame_log import FrameLog
 from fcmaster.bus.link import Link
 from fcmaster.bus.plan import DrivePlan, LinePlan
@@ -180,10 +180,6 @@ class BusMaster:
         return self._up
 
     # -- commands ------------------------------------------------------------------------
-
-    def drive(self, name: str) -> Drive:
-        """The handle of drive ``name``; KeyError if the line has none."""
-        return Drive(self, self.planner.slot(name).plan)
 
     async def execute(self, name: str | None, command: Command) -> CommandResult:
         """Carry out ``command`` on drive ``name`` (None: broadcast); one result, always."""
@@ -504,118 +500,3 @@ class BusMaster:
         target = step.slot.name if step.slot else "the line"
         tries = 1 + (step.pending.attempts if step.pending else 0)
         return f"no valid reply from {target} after {tries} attempt(s)"
-
-
-class Drive:
-    """A handle on one drive of a running BusMaster. Every method returns one result."""
-
-    __slots__ = ("_master", "plan")
-
-    def __init__(self, master: BusMaster, plan: DrivePlan) -> None:
-        self._master = master
-        self.plan = plan
-
-    @property
-    def name(self) -> str:
-        """The drive's configured name."""
-        return self.plan.name
-
-    async def execute(self, command: Command) -> CommandResult:
-        """Carry out any command."""
-        return await self._master.execute(self.plan.name, command)
-
-    def reference_pct(
-        self, frequency_hz: float | None, reference_pct: float | None
-    ) -> float | None:
-        """A reference in % of nominal frequency from whichever of the two is given."""
-        if frequency_hz is not None:
-            return frequency_hz / self.plan.nominal_frequency_hz * 100.0
-        return reference_pct
-
-    async def start(
-        self,
-        *,
-        frequency_hz: float | None = None,
-        reference_pct: float | None = None,
-        actor: str = "",
-    ) -> CommandResult:
-        """Run, optionally at a new reference."""
-        return await self.execute(
-            Command(
-                action=Action.START,
-                reference_pct=self.reference_pct(frequency_hz, reference_pct),
-                actor=actor,
-            )
-        )
-
-    async def set_reference(
-        self,
-        *,
-        frequency_hz: float | None = None,
-        reference_pct: float | None = None,
-        actor: str = "",
-    ) -> CommandResult:
-        """Change the reference without changing the motion."""
-        pct = self.reference_pct(frequency_hz, reference_pct)
-        if pct is None:
-            return CommandResult(
-                outcome=Outcome.INVALID, reason="give frequency_hz or reference_pct"
-            )
-        return await self.execute(
-            Command(action=Action.SET_REFERENCE, reference_pct=pct, actor=actor)
-        )
-
-    async def stop(self, *, actor: str = "") -> CommandResult:
-        """Ramp down and stay ready."""
-        return await self.execute(Command(action=Action.STOP, actor=actor))
-
-    async def coast(self, *, actor: str = "") -> CommandResult:
-        """Switch the output off; the motor free-wheels."""
-        return await self.execute(Command(action=Action.COAST, actor=actor))
-
-    async def quick_stop(self, *, actor: str = "") -> CommandResult:
-        """Ramp down on the quick-stop ramp."""
-        return await self.execute(Command(action=Action.QUICK_STOP, actor=actor))
-
-    async def reset(self, *, actor: str = "") -> CommandResult:
-        """Acknowledge a trip (a pulse; the motor does not restart by itself)."""
-        return await self.execute(Command(action=Action.RESET, actor=actor))
-
-    async def forward(self, *, actor: str = "") -> CommandResult:
-        """Turn forward."""
-        return await self.execute(Command(action=Action.FORWARD, actor=actor))
-
-    async def reverse(self, *, actor: str = "") -> CommandResult:
-        """Turn in reverse."""
-        return await self.execute(Command(action=Action.REVERSE, actor=actor))
-
-    async def jog(self, *, actor: str = "") -> CommandResult:
-        """Run at the jog speed."""
-        return await self.execute(Command(action=Action.JOG, actor=actor))
-
-    async def read(self, parameter: str, *, index: int = 0, actor: str = "") -> CommandResult:
-        """Read a parameter; the value is in ``result.value``."""
-        return await self.execute(
-            Command(action=Action.READ, parameter=parameter, index=index, actor=actor)
-        )
-
-    async def write(
-        self,
-        parameter: str,
-        value: float,
-        *,
-        index: int = 0,
-        persist: bool = False,
-        actor: str = "",
-    ) -> CommandResult:
-        """Write a parameter (``persist``: to non-volatile memory too)."""
-        return await self.execute(
-            Command(
-                action=Action.WRITE,
-                parameter=parameter,
-                index=index,
-                value=value,
-                persist=persist,
-                actor=actor,
-            )
-        )

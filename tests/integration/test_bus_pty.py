@@ -26,6 +26,7 @@ from fcmaster.sim.settings import DriveSettings, LineSettings
 from tests.integration.line_checks import assert_faults_counted_and_no_command_lost
 from tests.integration.tcp_bridge import TcpBridge, tcp_bridge
 from tests.integration.waiting import wait_for
+from tests.orders import orders
 
 LIMIT_S = 30.0
 ADDRESSES = (1, 2, 3, 4)
@@ -90,12 +91,12 @@ async def line_with_master(
 async def test_every_drive_is_polled_and_a_command_turns_the_motor() -> None:
     async with line_with_master(FaultPlan()) as (server, master):
         await wait_for(lambda: all(s.online for s in master.planner.slots))
-        result = await master.drive("d1").start(frequency_hz=25.0)
+        result = await orders(master, "d1").start(frequency_hz=25.0)
         assert result.outcome is Outcome.DONE
         drive = next(d for d in server.line.drives if d.address == 1)
         assert isinstance(drive, FcSimDrive)
         await wait_for(lambda: drive.motor.frequency_hz > 20.0)  # ramping up on the sim side
-        read = await master.drive("d1").read("16-13")
+        read = await orders(master, "d1").read("16-13")
         assert read.outcome is Outcome.DONE
         assert read.value is not None
         assert 0.0 < float(read.value.value) <= 25.0
@@ -108,7 +109,7 @@ async def test_faults_are_counted_and_no_command_is_lost() -> None:
     async with line_with_master(faults) as (server, master):
         await wait_for(lambda: master.stats.replies >= 300, timeout_s=20.0)
         results = await asyncio.gather(
-            *(master.drive(f"d{a}").read("16-14") for a in ADDRESSES for _ in range(5))
+            *(orders(master, f"d{a}").read("16-14") for a in ADDRESSES for _ in range(5))
         )
         counters = server.line.counters
     assert_faults_counted_and_no_command_lost(
@@ -132,12 +133,12 @@ async def test_a_line_served_over_tcp_is_polled_and_commanded(over: str) -> None
     bridges: list[TcpBridge] = []
     async with line_with_master(FaultPlan(), over=over, bridges=bridges) as (server, master):
         await wait_for(lambda: all(s.online for s in master.planner.slots))
-        result = await master.drive("d1").start(frequency_hz=25.0)
+        result = await orders(master, "d1").start(frequency_hz=25.0)
         assert result.outcome is Outcome.DONE
         drive = next(d for d in server.line.drives if d.address == 1)
         assert isinstance(drive, FcSimDrive)
         await wait_for(lambda: drive.motor.frequency_hz > 20.0)
-        read = await master.drive("d1").read("16-13")
+        read = await orders(master, "d1").read("16-13")
         assert read.outcome is Outcome.DONE
         assert read.value is not None
         assert 0.0 < float(read.value.value) <= 25.0

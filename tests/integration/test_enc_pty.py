@@ -28,6 +28,7 @@ from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.state import FleetState
 from tests.integration.line_checks import assert_faults_counted_and_no_command_lost
 from tests.integration.waiting import wait_for
+from tests.orders import orders
 
 LIMIT_S = 30.0
 ADDRESSES = (1, 2, 3)
@@ -113,7 +114,7 @@ async def test_polls_refresh_state_and_frequency_of_every_drive() -> None:
 async def test_start_with_frequency_stop_emergency_stop_and_reset() -> None:
     async with enc_line() as line:
         await wait_for(lambda: line.master.planner.slot("d1").online)
-        d1, sim = line.master.drive("d1"), line.drive(1)
+        d1, sim = orders(line.master, "d1"), line.drive(1)
         assert (await d1.start(frequency_hz=40.0)).outcome is Outcome.DONE
         await wait_for(lambda: state(line, "d1")["output_frequency_hz"] == 40.0)
         assert state(line, "d1")["running"] is True
@@ -144,7 +145,7 @@ async def test_start_with_frequency_stop_emergency_stop_and_reset() -> None:
 async def test_read_write_and_a_refusal() -> None:
     async with enc_line() as line:
         await wait_for(lambda: line.master.planner.slot("d1").online)
-        d1 = line.master.drive("d1")
+        d1 = orders(line.master, "d1")
         written = await d1.write("F0.08", 2.5)
         assert written.outcome is Outcome.DONE
         read = await d1.read("F0.08")
@@ -153,7 +154,7 @@ async def test_read_write_and_a_refusal() -> None:
         assert (read.value.value, read.value.unit, read.value.raw) == (2.5, "s", 25)
         assert line.drive(1).parameters.value(0x0008) == 2.5
 
-        current = await line.master.drive("d2").read("output_current")
+        current = await orders(line.master, "d2").read("output_current")
         assert current.outcome is Outcome.DONE
 
         # F2.17 takes 0-200 ms: the drive refuses 300 with response 30, stored nothing.
@@ -172,7 +173,7 @@ async def test_a_drive_in_local_operation_refuses_bus_control() -> None:
     local = DriveSettings(response_delay_s=0.005, parameters=RAMPS, local=True)
     async with enc_line(settings={1: local}) as line:
         await wait_for(lambda: line.master.planner.slot("d1").online)
-        result = await line.master.drive("d1").start(frequency_hz=20.0)
+        result = await orders(line.master, "d1").start(frequency_hz=20.0)
         assert result.outcome is Outcome.REFUSED
         assert result.error is not None
         assert result.error.code == 30
@@ -194,7 +195,11 @@ async def test_bad_checksums_and_timeouts_are_counted_and_recovered() -> None:
         # 19200 baud ASCII: ~40 replies/s, so 150 give ~15 injected faults to ride out.
         await wait_for(lambda: master.stats.replies >= 150, timeout_s=30.0)
         results = await asyncio.gather(
-            *(master.drive(f"d{a}").read("running_frequency") for a in ADDRESSES for _ in range(5))
+            *(
+                orders(master, f"d{a}").read("running_frequency")
+                for a in ADDRESSES
+                for _ in range(5)
+            )
         )
         counters = line.server.line.counters
         assert all(s.online for s in master.planner.slots)  # nobody lost for good

@@ -30,6 +30,7 @@ from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.state import DriveState, DriveUpdated, Event, FleetState
 from tests.integration.waiting import wait_for
+from tests.orders import orders
 
 LIMIT_S = 40.0
 WALL0 = 1_800_000_000.0  # the fleet's wall clock is this plus monotonic time
@@ -114,7 +115,7 @@ async def test_no_state_shows_an_old_frequency_under_a_new_time(protocol: str) -
             plan, codec=codec_for(plan), transport=transport, clock=clock, observer=recorder
         ) as master:
             await wait_for(lambda: master.planner.slot("d1").online)
-            handle = master.drive("d1")
+            handle = orders(master, "d1")
             for order in (handle.start(frequency_hz=45.0), handle.set_reference(frequency_hz=5.0)):
                 result = await order
                 assert result.outcome is Outcome.DONE, result.reason

@@ -24,6 +24,7 @@ from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from tests.integration.line_checks import assert_faults_counted_and_no_command_lost
 from tests.integration.waiting import wait_for
+from tests.orders import orders
 
 LIMIT_S = 40.0
 STATIONS = (0, 1, 10, 31)  # 10 is "0A" on the wire, 31 "1F"
@@ -67,7 +68,7 @@ def sim_drive(server: PtyServer, address: int) -> MitsubishiSimDrive:
 async def test_polls_commands_and_parameter_access_over_the_pty() -> None:
     async with line_with_master(FaultPlan()) as (server, master):
         await wait_for(lambda: all(s.online for s in master.planner.slots))
-        d1, drive = master.drive("d1"), sim_drive(server, 1)
+        d1, drive = orders(master, "d1"), sim_drive(server, 1)
         started = await d1.start(frequency_hz=30.0)
         assert started.outcome is Outcome.DONE, started.reason
         assert drive.control.set_hz == 30.0  # HED 0BB8 reached the drive
@@ -77,14 +78,14 @@ async def test_polls_commands_and_parameter_access_over_the_pty() -> None:
         changed = await d1.set_reference(frequency_hz=20.0)
         assert changed.outcome is Outcome.DONE, changed.reason
         assert drive.control.set_hz == 20.0
-        read = await master.drive("d31").read("Pr.7")
+        read = await orders(master, "d31").read("Pr.7")
         assert read.outcome is Outcome.DONE, read.reason
         assert read.value is not None
         assert (read.value.value, read.value.unit) == (5.0, "s")
         written = await d1.write("Pr.8", 2.5)
         assert written.outcome is Outcome.DONE, written.reason
         assert drive.parameters[8] == 25
-        monitored = await master.drive("d10").read("H6F")
+        monitored = await orders(master, "d10").read("H6F")
         assert monitored.outcome is Outcome.DONE
         assert monitored.value is not None
         assert monitored.value.value == 0.0  # never started
@@ -98,13 +99,13 @@ async def test_polls_commands_and_parameter_access_over_the_pty() -> None:
 async def test_a_refusal_comes_back_with_the_drives_error_code() -> None:
     async with line_with_master(FaultPlan()) as (server, master):
         await wait_for(lambda: master.planner.slot("d1").online)
-        result = await master.drive("d1").write("Pr.7", 4000.0)  # beyond 3600.0 s
+        result = await orders(master, "d1").write("Pr.7", 4000.0)  # beyond 3600.0 s
         assert result.outcome is Outcome.REFUSED
         assert result.error is not None
         assert result.error.code == 0xC
         assert "Data range" in result.reason
         assert sim_drive(server, 1).parameters[7] == 50  # unchanged
-        beyond = await master.drive("d1").start(frequency_hz=80.0)  # configured max 50 Hz
+        beyond = await orders(master, "d1").start(frequency_hz=80.0)  # configured max 50 Hz
         assert beyond.outcome is Outcome.NOT_ALLOWED
 
 
@@ -114,7 +115,7 @@ async def test_faults_are_counted_and_every_command_ends_once() -> None:
     async with line_with_master(faults, parameters={"Pr.121": 9999.0}) as (server, master):
         await wait_for(lambda: master.stats.replies >= 200, timeout_s=20.0)
         results = await asyncio.gather(
-            *(master.drive(f"d{a}").read("Pr.7") for a in STATIONS for _ in range(3))
+            *(orders(master, f"d{a}").read("Pr.7") for a in STATIONS for _ in range(3))
         )
         counters = server.line.counters
     assert_faults_counted_and_no_command_lost(
@@ -134,7 +135,7 @@ async def test_a_silent_drive_is_demoted_and_comes_back() -> None:
 
 async def test_reset_restarts_the_drive_and_the_master_waits_for_it() -> None:
     async with line_with_master(FaultPlan(), parameters={"Pr.122": 1.0}) as (server, master):
-        d1, drive = master.drive("d1"), sim_drive(server, 1)
+        d1, drive = orders(master, "d1"), sim_drive(server, 1)
         await wait_for(lambda: master.planner.slot("d1").online)
         assert (await d1.start(frequency_hz=15.0)).ok
         timeouts = master.stats.timeouts

@@ -13,6 +13,7 @@ from fcmaster.bus.commands import Outcome
 from fcmaster.bus.link import ANSWER_SAMPLES
 from fcmaster.bus.plan import DrivePlan
 from tests.fakes import Sent, Timed
+from tests.orders import orders
 from tests.unit.bus.bench import DELAY_S, PARAMETER, PAUSE_S, T0, bench, delayed, exchange_s
 from tests.unit.bus.fcdrive import FcDrive, FcLine
 
@@ -83,7 +84,7 @@ async def test_a_commands_exchange_keeps_the_plans_deadline() -> None:
     async with b.master:
         await b.clock.run_until(T0 + 1.0)
         count = len(b.transport.sent)
-        result = await b.complete(b.submit(b.master.drive("m").read("16-14")))
+        result = await b.complete(b.submit(orders(b.master, "m").read("16-14")))
         await b.clock.run_for(0.1)
     assert result.outcome is Outcome.DONE
     plan, sent = b.plan, b.transport.sent

@@ -25,6 +25,7 @@ from fcmaster.protocol.danfoss_fc import (
 )
 from fcmaster.protocol.drive import ControlIntent, Motion
 from tests.fakes import Timed
+from tests.orders import orders
 from tests.unit.bus.bench import (
     CHAR_S,
     IGNORED,
@@ -111,9 +112,9 @@ async def test_never_two_requests_in_flight_with_slow_and_silent_drives_and_comm
     )
     async with b.master:
         await b.clock.run_until(T0 + 0.2)
-        drive = b.master.drive("a")
+        drive = orders(b.master, "a")
         b.submit(drive.start(frequency_hz=20))
-        b.submit(b.master.drive("slow").read("16-14"))
+        b.submit(orders(b.master, "slow").read("16-14"))
         await b.clock.run_until(T0 + 0.5)
         b.submit(drive.stop())
         b.submit(b.master.execute(None, Command(action=Action.STOP)))
@@ -185,7 +186,7 @@ async def test_command_is_the_very_next_request_after_the_one_in_flight() -> Non
         await b.clock.run_until(T0 + 0.2)
         in_flight = await b.mid_transaction()
         count = len(b.transport.sent)
-        result = await b.complete(b.submit(b.master.drive("a").read("16-14")))
+        result = await b.complete(b.submit(orders(b.master, "a").read("16-14")))
     assert result.outcome is Outcome.DONE
     command = b.transport.sent[count]
     assert command.at == approx((in_flight.reply_at or 0.0) + PAUSE_S)
@@ -199,9 +200,9 @@ async def test_urgent_stop_overtakes_commands_queued_before_it() -> None:
         await b.clock.run_until(T0 + 0.2)
         await b.mid_transaction()
         count = len(b.transport.sent)
-        drive = b.master.drive("a")
+        drive = orders(b.master, "a")
         read = b.submit(drive.read("16-13"))
-        write = b.submit(b.master.drive("m").read("3-41"))  # a monitor drive may be read
+        write = b.submit(orders(b.master, "m").read("3-41"))  # a monitor drive may be read
         stop = b.submit(drive.coast())
         for task in (read, write, stop):
             await b.complete(task)
@@ -217,7 +218,7 @@ async def test_queued_references_coalesce_and_the_newest_wins() -> None:
     async with b.master:
         await b.clock.run_until(T0 + 0.2)
         await b.mid_transaction()
-        drive = b.master.drive("a")
+        drive = orders(b.master, "a")
         with structlog.testing.capture_logs() as logs:
             tasks = [b.submit(drive.set_reference(reference_pct=pct)) for pct in (20.0, 30.0, 40.0)]
             for task in tasks:
@@ -249,12 +250,12 @@ async def test_stop_cancels_queued_start_jog_and_reference_of_that_drive_only() 
     async with b.master:
         await b.clock.run_until(T0 + 0.2)
         await b.mid_transaction()
-        drive = b.master.drive("a")
+        drive = orders(b.master, "a")
         start = b.submit(drive.start(reference_pct=30.0))
         jog = b.submit(drive.jog())
         reference = b.submit(drive.set_reference(reference_pct=25.0))
         read = b.submit(drive.read("16-13"))
-        other = b.submit(b.master.drive("b").start(reference_pct=10.0))
+        other = b.submit(orders(b.master, "b").start(reference_pct=10.0))
         stop = b.submit(drive.stop())
         await b.complete(other)
     for task in (start, jog, reference):
@@ -271,7 +272,7 @@ async def test_stop_while_start_is_on_the_wire_lets_the_start_finish_then_stops(
     b = bench(A)
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
-        drive = b.master.drive("a")
+        drive = orders(b.master, "a")
         start = b.submit(drive.start(reference_pct=50.0))
         in_flight = await b.mid_transaction()
         while b.requests()[-1][1].pcd1 != RUN_WORD:
@@ -293,7 +294,7 @@ async def test_reference_while_reference_is_on_the_wire_goes_out_after_it() -> N
     b = bench(A, fc=[FcDrive(1, running=True, output_pct=50.0)])
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
-        drive = b.master.drive("a")
+        drive = orders(b.master, "a")
         first = b.submit(drive.set_reference(reference_pct=20.0))
         await b.mid_transaction()
         while b.requests()[-1][1].pcd2 != encode_reference(20.0):
@@ -316,7 +317,7 @@ async def test_monitor_only_drive_gets_an_ignored_control_word_in_every_telegram
     b = bench(M, fc=[FcDrive(3, running=True, output_pct=50.0)])
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
-        drive = b.master.drive("m")
+        drive = orders(b.master, "m")
         read = await b.complete(b.submit(drive.read("16-13")))
         results = [
             await b.complete(b.submit(call))
@@ -380,7 +381,7 @@ async def test_start_sends_run_word_and_reference_and_every_later_telegram_repea
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
         count = len(b.transport.sent)
-        result = await b.complete(b.submit(b.master.drive("a").start(frequency_hz=25.0)))
+        result = await b.complete(b.submit(orders(b.master, "a").start(frequency_hz=25.0)))
         await b.clock.run_for(0.3)
     assert result.outcome is Outcome.DONE
     later = [t for _, t in b.requests()[count:]]
@@ -394,7 +395,7 @@ async def test_reference_beyond_max_frequency_is_refused_and_never_sent() -> Non
     b = bench(plan)
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
-        drive = b.master.drive("a")
+        drive = orders(b.master, "a")
         start = await b.complete(b.submit(drive.start(frequency_hz=45.0)))
         reference = await b.complete(b.submit(drive.set_reference(frequency_hz=-41.0)))
         await b.clock.run_for(0.1)
@@ -413,7 +414,7 @@ async def test_trip_turns_the_intent_into_a_stop_so_a_reset_does_not_restart() -
         b.drives[1].trip()
         await b.clock.run_for(0.2)
         count = len(b.transport.sent)
-        result = await b.complete(b.submit(b.master.drive("a").reset()))
+        result = await b.complete(b.submit(orders(b.master, "a").reset()))
         await b.clock.run_for(0.2)
     assert result.outcome is Outcome.DONE
     after_trip = [t.pcd1 for at, t in b.requests() if at > tripped_at]
@@ -428,7 +429,7 @@ async def test_reset_is_a_one_telegram_pulse_of_bit_7() -> None:
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
         count = len(b.transport.sent)
-        result = await b.complete(b.submit(b.master.drive("a").reset()))
+        result = await b.complete(b.submit(orders(b.master, "a").reset()))
         await b.clock.run_for(0.1)
     assert result.outcome is Outcome.DONE
     words = [t.pcd1 for _, t in b.requests()[count:]]
@@ -443,7 +444,7 @@ async def test_drive_in_local_operation_leaves_a_start_unconfirmed_and_refuses_a
     b = bench(A, fc=[FcDrive(1, local=True)])
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
-        drive = b.master.drive("a")
+        drive = orders(b.master, "a")
         started = await b.complete(b.submit(drive.start(reference_pct=10.0)))
         referred = await b.complete(b.submit(drive.set_reference(reference_pct=20.0)))
     assert started.outcome is Outcome.UNCONFIRMED
@@ -461,7 +462,7 @@ async def test_parameter_read_returns_the_scaled_value() -> None:
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
         count = len(b.transport.sent)
-        result = await b.complete(b.submit(b.master.drive("a").read("16-13")))
+        result = await b.complete(b.submit(orders(b.master, "a").read("16-13")))
     assert result.outcome is Outcome.DONE
     assert result.value is not None
     assert (result.value.value, result.value.unit, result.value.raw) == (50.3, "Hz", 503)
@@ -485,7 +486,7 @@ async def test_parameter_write_sends_the_raw_value(persist: bool, ak: RequestAk)
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
         count = len(b.transport.sent)
-        drive = b.master.drive("a")
+        drive = orders(b.master, "a")
         result = await b.complete(b.submit(drive.write("3-41", 7.5, persist=persist)))
     assert result.outcome is Outcome.DONE
     assert result.value is not None
@@ -499,7 +500,7 @@ async def test_drive_error_ak_7_ends_refused_with_the_drives_error_code() -> Non
     b = bench(A, fc=[FcDrive(1, errors={1500: 130})])
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
-        result = await b.complete(b.submit(b.master.drive("a").read("15-00")))
+        result = await b.complete(b.submit(orders(b.master, "a").read("15-00")))
     assert result.outcome is Outcome.REFUSED
     assert result.error is not None
     assert (result.error.code, result.error.text) == (130, "No bus access for this parameter")
@@ -617,13 +618,13 @@ async def test_line_loss_cancels_queued_commands_reports_the_line_down_and_reope
         in_flight = await b.mid_transaction()
         b.transport.lost = True
         queued = [
-            b.submit(b.master.drive("a").start(reference_pct=10.0)),
-            b.submit(b.master.drive("b").read("16-13")),
+            b.submit(orders(b.master, "a").start(reference_pct=10.0)),
+            b.submit(orders(b.master, "b").read("16-13")),
         ]
         lost_at = in_flight.reply_at or 0.0
         await b.clock.run_until(lost_at)
         assert not b.master.is_up
-        while_down = await b.complete(b.submit(b.master.drive("a").stop()))
+        while_down = await b.complete(b.submit(orders(b.master, "a").stop()))
         await b.clock.run_for(1.0)
         assert b.master.is_up
     for task in queued:
@@ -670,7 +671,7 @@ async def test_port_that_will_not_open_is_retried_with_growing_jittered_backoff(
     b.transport.fail_open = True
     async with b.master:
         assert not b.master.is_up
-        result = await b.complete(b.submit(b.master.drive("a").stop()))
+        result = await b.complete(b.submit(orders(b.master, "a").stop()))
         await b.clock.run_until(T0 + 40.0)
         b.transport.fail_open = False
         await b.clock.run_for(60.0)
@@ -780,7 +781,7 @@ async def test_drive_that_was_told_to_stop_is_probed_with_the_stop_word() -> Non
     b = bench(A, fc=[FcDrive(1, running=True, output_pct=50.0)], probe_interval_s=0.5)
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
-        await b.complete(b.submit(b.master.drive("a").stop()))
+        await b.complete(b.submit(orders(b.master, "a").stop()))
         b.drives[1].silent = True
         await b.clock.run_until(T0 + 2.0)
     probes = [t for at, t in b.requests() if at > T0 + 0.3 and t.pke is None]
@@ -796,13 +797,13 @@ async def test_every_command_gets_exactly_one_outcome_also_at_shutdown() -> None
     async with b.master:
         await b.clock.run_until(T0 + 0.5)
         calls = [
-            b.master.drive("a").start(reference_pct=10.0),
-            b.master.drive("b").read("16-13"),
-            b.master.drive("a").read("16-13"),
-            b.master.drive("b").start(reference_pct=20.0),
-            b.master.drive("a").set_reference(reference_pct=30.0),
-            b.master.drive("b").stop(),
-            b.master.drive("a").stop(),
+            orders(b.master, "a").start(reference_pct=10.0),
+            orders(b.master, "b").read("16-13"),
+            orders(b.master, "a").read("16-13"),
+            orders(b.master, "b").start(reference_pct=20.0),
+            orders(b.master, "a").set_reference(reference_pct=30.0),
+            orders(b.master, "b").stop(),
+            orders(b.master, "a").stop(),
         ]
         tasks = [b.submit(call) for call in calls]
         await b.clock.run_for(0.15)
@@ -831,7 +832,7 @@ async def test_command_after_shutdown_is_cancelled_at_once() -> None:
     async with b.master:
         await b.clock.run_until(T0 + 0.1)
     assert not b.master.is_up
-    result = await b.master.drive("a").stop()
+    result = await orders(b.master, "a").stop()
     assert result.outcome is Outcome.CANCELLED
 
 
@@ -839,7 +840,7 @@ async def test_command_sent_right_after_entering_finds_the_line_open() -> None:
     b = bench(A)
     async with b.master:
         assert b.master.is_up
-        result = await b.complete(b.submit(b.master.drive("a").stop()))
+        result = await b.complete(b.submit(orders(b.master, "a").stop()))
     assert result.outcome is Outcome.DONE
     assert b.words(1)[:2] == [IGNORED, STOP_WORD]
 
@@ -882,7 +883,7 @@ async def test_a_start_applied_with_its_replies_lost_is_adopted_never_stopped() 
     async with b.master:
         await b.clock.run_until(T0 + 0.2)
         assert b.words(1)[-1] == STOP_WORD  # adopted stopped
-        result = await b.complete(b.submit(b.master.drive("a").start(reference_pct=50.0)))
+        result = await b.complete(b.submit(orders(b.master, "a").start(reference_pct=50.0)))
         assert result.outcome is Outcome.TIMEOUT
         sent_before = len(b.words(1))
         await b.clock.run_for(0.5)

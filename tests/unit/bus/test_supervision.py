@@ -17,6 +17,7 @@ from fcmaster.bus.master import BACKOFF_FIRST_S
 from fcmaster.bus.plan import DrivePlan
 from fcmaster.protocol.codec import Reply
 from fcmaster.protocol.drive import ControlIntent
+from tests.orders import orders
 from tests.unit.bus.bench import T0, Recorder, bench
 
 A = DrivePlan(name="a", address=1, control=True)
@@ -43,7 +44,7 @@ async def test_an_observer_that_raises_is_logged_and_the_line_goes_on() -> None:
     with capture_logs() as logs:
         async with b.master:
             await b.clock.run_until(T0 + 0.5)
-            result = await b.complete(b.submit(b.master.drive("a").start(reference_pct=20.0)))
+            result = await b.complete(b.submit(orders(b.master, "a").start(reference_pct=20.0)))
             sent = len(b.transport.sent)
             await b.clock.run_for(0.5)
     assert result.outcome is Outcome.DONE
@@ -64,7 +65,7 @@ async def test_a_port_driver_raising_on_open_is_retried_and_the_reason_shown() -
         async with b.master:
             assert not b.master.is_up
             reason = b.master.stats.to_json(b.clock.now())["down_reason"]
-            result = await b.complete(b.submit(b.master.drive("a").stop()))
+            result = await b.complete(b.submit(orders(b.master, "a").stop()))
             await b.clock.run_for(2.0)
             assert b.master.is_up
             assert b.master.stats.down_reason is None
@@ -91,8 +92,8 @@ async def test_a_loop_that_raises_takes_the_line_down_ends_commands_and_restarts
             in_flight = await b.mid_transaction()
             b.transport.read_error = RuntimeError("driver bug")
             queued = [
-                b.submit(b.master.drive("a").start(reference_pct=10.0)),
-                b.submit(b.master.drive("b").read("16-13")),
+                b.submit(orders(b.master, "a").start(reference_pct=10.0)),
+                b.submit(orders(b.master, "b").read("16-13")),
             ]
             # The read under way finishes; the next one (the start's) raises.
             await b.clock.run_until((in_flight.reply_at or 0.0) + 0.01)
@@ -101,7 +102,7 @@ async def test_a_loop_that_raises_takes_the_line_down_ends_commands_and_restarts
             shown = b.master.stats.to_json(b.clock.now())["down_reason"]
             await b.clock.run_for(2.0)
             assert b.master.is_up
-            after = await b.complete(b.submit(b.master.drive("b").read("16-13")))
+            after = await b.complete(b.submit(orders(b.master, "b").read("16-13")))
     reason = "internal error in serve: RuntimeError: driver bug"
     assert shown == reason
     for task in queued:

@@ -21,6 +21,7 @@ from fcmaster.sim import (
     build_line,
 )
 from tests.fakes import VirtualClock
+from tests.orders import orders
 
 
 def master_on_sim(clock: VirtualClock, faults: FaultPlan) -> tuple[BusMaster, list[FcSimDrive]]:
@@ -40,7 +41,7 @@ async def test_master_starts_a_simulated_drive_and_polls_the_rest() -> None:
     clock = VirtualClock()
     master, drives = master_on_sim(clock, FaultPlan())
     async with master:
-        result = await clock.complete(master.drive("d1").start(reference_pct=50.0))
+        result = await clock.complete(orders(master, "d1").start(reference_pct=50.0))
         assert result.ok, result.reason
         await clock.run_for(5.0)
         drives[0].advance(clock.now())
@@ -57,7 +58,7 @@ async def test_master_rides_out_lost_and_corrupted_replies() -> None:
     master, _ = master_on_sim(clock, FaultPlan(drop=0.1, corrupt=0.1, seed=1))
     async with master:
         await clock.run_for(1.0)
-        result = await clock.complete(master.drive("d1").read("3-41"))
+        result = await clock.complete(orders(master, "d1").read("3-41"))
         assert result.ok
         assert result.value is not None
         assert result.value.value == 3.0
@@ -88,20 +89,20 @@ async def test_starts_and_stops_are_done_only_as_the_simulated_drives_show_them(
     async with master:
         await clock.run_for(0.5)
         t0 = clock.now()
-        runs = await clock.complete(master.drive("d1").start(reference_pct=50.0))
+        runs = await clock.complete(orders(master, "d1").start(reference_pct=50.0))
         assert runs.outcome is Outcome.DONE
         assert clock.now() - t0 < 1.0  # shown running as soon as its output rises
-        local = await clock.complete(master.drive("d2").start(reference_pct=50.0))
+        local = await clock.complete(orders(master, "d2").start(reference_pct=50.0))
         assert local.outcome is Outcome.UNCONFIRMED
         assert "local operation" in local.reason
         t0 = clock.now()
-        ignored = await clock.complete(master.drive("d3").start(reference_pct=50.0))
+        ignored = await clock.complete(orders(master, "d3").start(reference_pct=50.0))
         assert ignored.outcome is Outcome.UNCONFIRMED
         assert ignored.reason.startswith("not running after 4 s: the drive reports ready")
         assert 4.0 <= clock.now() - t0 < 4.5
         await clock.run_for(5.0)  # d1 at speed
         t0 = clock.now()
-        stopped = await clock.complete(master.drive("d1").stop())
+        stopped = await clock.complete(orders(master, "d1").stop())
         assert stopped.outcome is Outcome.DONE
         drives[1].advance(clock.now())
         assert drives[1].motor.frequency_hz == 0.0

@@ -26,6 +26,7 @@ from fcmaster.sim import (
     build_line,
 )
 from tests.fakes import VirtualClock
+from tests.orders import orders
 
 PLAN = LinePlan(
     name="line1", port="sim://line1", protocol="mitsubishi", stopbits=2,
@@ -53,7 +54,7 @@ async def test_start_read_write_and_stop_through_the_master() -> None:
     clock = VirtualClock()
     master, drives = master_on_sim(clock)
     async with master:
-        d0 = master.drive("d0")
+        d0 = orders(master, "d0")
         assert (await clock.complete(d0.start(frequency_hz=30.0))).ok
         await clock.run_for(5.0)
         drives[0].advance(clock.now())
@@ -66,7 +67,7 @@ async def test_start_read_write_and_stop_through_the_master() -> None:
         assert refused.outcome is Outcome.REFUSED
         assert refused.error is not None
         assert refused.error.code == 0xA  # mode error
-        read = await clock.complete(master.drive("d5").read("Pr.7"))
+        read = await clock.complete(orders(master, "d5").read("Pr.7"))
         assert read.ok, read.reason
         assert read.value is not None
         assert (read.value.value, read.value.unit) == (5.0, "s")
@@ -81,7 +82,7 @@ async def test_reset_is_sent_once_and_the_drive_is_left_alone_while_it_restarts(
     clock = VirtualClock()
     master, drives = master_on_sim(clock, Pr_122=0.5)
     async with master:
-        d0 = master.drive("d0")
+        d0 = orders(master, "d0")
         assert (await clock.complete(d0.start(frequency_hz=20.0))).ok
         await clock.run_for(3.0)
         before = master.stats.drives["d0"].requests
@@ -107,7 +108,7 @@ async def test_the_drives_watchdog_trips_it_once_the_master_is_gone() -> None:
     clock = VirtualClock()
     master, drives = master_on_sim(clock, Pr_122=1.0)
     async with master:
-        assert (await clock.complete(master.drive("d0").start(frequency_hz=25.0))).ok
+        assert (await clock.complete(orders(master, "d0").start(frequency_hz=25.0))).ok
         await clock.run_for(3.0)
         drives[0].advance(clock.now())
         assert drives[0].control.fault is None  # fed by the polls while the master runs
@@ -128,7 +129,7 @@ async def test_lost_and_corrupted_replies_are_counted_and_ridden_out() -> None:
     master, _ = master_on_sim(clock, faults, retries=3, Pr_121=9999)
     async with master:
         await clock.run_for(1.0)
-        read = await clock.complete(master.drive("d5").read("Pr.7"))
+        read = await clock.complete(orders(master, "d5").read("Pr.7"))
         assert read.ok, read.reason
         await clock.run_for(10.0)
         stats = master.stats
