@@ -6,7 +6,8 @@ Reads come from the fleet state in memory; commands and parameter access go thro
 of :data:`OUTCOME_STATUS` and the result JSON (``outcome``, ``reason``, …) as the body.
 Refusals before a command reaches a line (no or wrong token, a viewer's command, a
 malformed body) are logged as ``http.command_refused`` with the actor and the reason; the
-bus logs every command that reaches it as ``command.completed`` with the same actor.
+bus logs every command that reaches it as ``command.completed`` with the same actor. How a
+request's body, caller and refusals are read lives in :mod:`fcmaster.adapters.api_requests`.
 """
 
 from __future__ import annotations
@@ -14,22 +15,27 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Final
 
-import structlog
-from fastapi import Body, Depends, FastAPI, Query, Request, Security, WebSocket
+from fastapi import Body, FastAPI, Query, Request, WebSocket
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import Response
-from fastapi.routing import APIRoute
-from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException
-from starlette.requests import ClientDisconnect
 
 from fcmaster import __version__
 from fcmaster.adapters import metrics
+from fcmaster.adapters.api_requests import (
+    Operator,
+    StrictJsonRoute,
+    Viewer,
+    actor_of,
+    describe_error,
+    log_refused,
+    peek_action,
+)
 from fcmaster.adapters.auth import Authenticator, AuthError, Principal, Role
-from fcmaster.adapters.command_json import loads, parse_command, refusal
+from fcmaster.adapters.command_json import parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.messages import event_json
 from fcmaster.adapters.middleware import (
@@ -38,7 +44,6 @@ from fcmaster.adapters.middleware import (
     StopsOnly,
     error_body,
     json_response,
-    replaying,
     states_json,
 )
 from fcmaster.adapters.parameter_sets import (
@@ -64,8 +69,6 @@ from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.errors import UsageError
 from fcmaster.protocol.parameter_set import ParameterSet
 from fcmaster.state import AvailabilityChanged, CommandCompleted, ConditionChanged, rfc3339
-
-log = structlog.get_logger("fcmaster.adapters.http")
 
 STATIC: Final = Path(__file__).resolve().parent / "static"
 MAX_BODY_BYTES: Final = 64 * 1024
@@ -109,8 +112,6 @@ viewer's parameter reads are spaced out per line (they share the line with the p
 says too many are already waiting there.
 """
 
-_bearer = HTTPBearer(auto_error=False, description="a token from http.tokens")
-
 _AUTH_ERRORS: Final[dict[int | str, dict[str, Any]]] = {
     401: {"model": ErrorOut, "description": "No token, or not a known one"},
 }
@@ -135,71 +136,6 @@ def result_response(result: CommandResult, **extra: Any) -> Response:
     return json_response({**result.to_json(), **extra}, OUTCOME_STATUS[result.outcome])
 
 
-def _describe(error: dict[str, Any]) -> str:
-    where = ".".join(str(part) for part in error.get("loc", ()))
-    if error.get("type") == "json_invalid":
-        return f"the body is not valid JSON: {error.get('ctx', {}).get('error', 'unreadable')}"
-    return f"{where}: {error.get('msg', 'invalid')}"
-
-
-async def _peek_action(request: Request) -> str | None:
-    try:
-        payload = loads(await request.body())
-    except (ValueError, ClientDisconnect, HTTPException):  # not JSON, gone, or too large
-        return None
-    action = payload.get("action") if isinstance(payload, dict) else None
-    return action if isinstance(action, str) else None
-
-
-class _StrictJsonRequest(Request):
-    """A request whose JSON body follows the command rules (no duplicated keys, no NaN)."""
-
-    async def json(self) -> Any:
-        """The body as JSON; json.JSONDecodeError (a 422 ``invalid``) when it breaks a rule."""
-        if not hasattr(self, "_json"):
-            self._json = loads(await self.body())
-        return self._json
-
-
-class _StrictJsonRoute(APIRoute):
-    """Routes that read bodies with :class:`_StrictJsonRequest`."""
-
-    def get_route_handler(self) -> Any:
-        """FastAPI's handler, handed the strict request."""
-        handler = super().get_route_handler()
-
-        async def strict(request: Request) -> Response:
-            # Read through ``request``, which caches the body for the error handlers.
-            body = await request.body()
-            response: Response = await handler(
-                _StrictJsonRequest(request.scope, replaying(body, request.receive))
-            )
-            return response
-
-        return strict
-
-
-def _caller(
-    request: Request,
-    _: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)],
-) -> Principal:
-    auth: Authenticator = request.app.state.auth
-    return auth.authenticate(
-        request.headers.get("authorization"),
-        client_host=request.client.host if request.client else None,
-        host_header=request.headers.get("host"),
-    )
-
-
-def _operator(principal: Annotated[Principal, Depends(_caller)]) -> Principal:
-    Authenticator.require(principal, Role.OPERATOR)
-    return principal
-
-
-Viewer = Annotated[Principal, Depends(_caller)]
-Operator = Annotated[Principal, Depends(_operator)]
-
-
 def create_app(
     gateway: Gateway,
     auth: Authenticator,
@@ -217,7 +153,7 @@ def create_app(
         docs_url=None,  # Swagger UI and ReDoc load from a CDN; the dashboard loads nothing
         redoc_url=None,
     )
-    app.router.route_class = _StrictJsonRoute
+    app.router.route_class = StrictJsonRoute
     registry = streams if streams is not None else StreamRegistry()
     viewer_reads = ViewerReads()
     app.state.auth = auth
@@ -229,13 +165,13 @@ def create_app(
         plan = gateway.drive_plan(name)
         if plan is None or gateway.fleet.find(name) is None:
             reason = f"no drive called {name!r}"
-            _log_refused(principal.name, name, payload.get("action"), "invalid", reason)
+            log_refused(principal.name, name, payload.get("action"), "invalid", reason)
             raise HTTPException(404, reason)
         try:
             command: Command = parse_command(payload, plan, actor=principal.name)
         except UsageError as exc:
             result = refusal(exc)
-            _log_refused(principal.name, name, payload.get("action"), result.outcome, str(exc))
+            log_refused(principal.name, name, payload.get("action"), result.outcome, str(exc))
             return result_response(result, **extra)
         return result_response(await gateway.execute(name, command), **extra)
 
@@ -244,10 +180,10 @@ def create_app(
     @app.exception_handler(AuthError)
     async def _autherror_body(request: Request, exc: AuthError) -> Response:
         if request.method in ("POST", "PUT"):
-            _log_refused(
+            log_refused(
                 exc.actor,
                 request.path_params.get("name"),
-                await _peek_action(request),
+                await peek_action(request),
                 "forbidden" if exc.status == 403 else "unauthorized",
                 exc.reason,
             )
@@ -257,13 +193,13 @@ def create_app(
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> Response:
         errors = jsonable_encoder(exc.errors())
-        reason = "; ".join(_describe(e) for e in errors)
+        reason = "; ".join(describe_error(e) for e in errors)
         if request.method in ("POST", "PUT"):
-            actor = _actor(auth, request)
-            _log_refused(
+            actor = actor_of(auth, request)
+            log_refused(
                 actor,
                 request.path_params.get("name"),
-                await _peek_action(request),
+                await peek_action(request),
                 "invalid",
                 reason,
             )
@@ -528,25 +464,3 @@ _PAGE_HEADERS: Final = {
     ),
     "Cache-Control": "no-cache",
 }
-
-
-def _actor(auth: Authenticator, request: Request) -> str:
-    try:
-        return auth.authenticate(
-            request.headers.get("authorization"),
-            client_host=request.client.host if request.client else None,
-            host_header=request.headers.get("host"),
-        ).name
-    except AuthError:
-        return "-"
-
-
-def _log_refused(actor: str, drive: object, action: object, outcome: str, reason: str) -> None:
-    log.info(
-        "http.command_refused",
-        actor=actor or "-",
-        drive=drive,
-        command=action if isinstance(action, str) else None,
-        outcome=outcome,
-        reason=reason,
-    )
