@@ -1,9 +1,12 @@
 """Commissioning commands that talk to a port directly, without a daemon.
 
-`scan`, `status`, `read`, `write` and `control` open the port, carry a few exchanges over
-a :class:`~fcmaster.bus.link.Link` — the same wire discipline the daemon uses — and close
-it. `control` goes through the same :class:`~fcmaster.bus.planner.Planner` as the daemon, so
-limits are checked and a running drive is adopted, never jolted.
+`scan`, `read` and `write` open the port, carry a few exchanges over a
+:class:`~fcmaster.bus.link.Link` — the same wire discipline the daemon uses — and close it.
+`status` and `control` run the daemon's own :class:`~fcmaster.bus.master.BusMaster` on the
+open port for one drive: `status` lets it poll one round of the drive's monitor list into a
+:class:`~fcmaster.state.FleetState`, its observer, as the daemon's lines do; `control`
+hands it the command and awaits its one result, so limits are checked and a running drive
+is adopted, never jolted, exactly as in the daemon.
 """
 
 from __future__ import annotations
@@ -17,12 +20,14 @@ from typing import Any
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.link import Link
+from fcmaster.bus.master import BusMaster, BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.planner import Planner
 from fcmaster.bus.serial import SerialTransport
+from fcmaster.bus.stats import DriveStats
 from fcmaster.clock import MonotonicClock
 from fcmaster.errors import BusError, CommandError, UsageError
 from fcmaster.protocol.codec import DriveCodec, Reply
+from fcmaster.protocol.drive import ControlIntent
 from fcmaster.state import FleetState
 
 # Factory line settings per protocol: baud rate, parity, stop bits.
@@ -99,6 +104,12 @@ class _Session:
     async def poll(self, address: int, read: Any = None) -> Reply | None:
         """One monitor-only poll (the drive is never commanded)."""
         return await self.link.transact(self.codec.poll(address, None, read))
+
+    def master(self, plan: LinePlan, observer: BusObserver | None = None) -> BusMaster:
+        """The daemon's BusMaster for ``plan`` on this open port (it closes the port)."""
+        return BusMaster(
+            plan, codec=self.codec, transport=self.transport, clock=self.clock, observer=observer
+        )
 
 
 def _check_address(codec: DriveCodec, address: int) -> None:
@@ -179,17 +190,18 @@ async def status(options: LineOptions, address: int, *, as_json: bool) -> int:
     """One drive's decoded state now: status, then every default monitor value."""
     drive = DrivePlan(name=f"drive-{address}", address=address)
     plan = options.plan((drive,))
-    fleet = FleetState((plan,), emit=lambda event: None, clock=MonotonicClock())
     async with _Session(plan) as session:
         _check_address(session.codec, address)
-        sequence = session.codec.poll_sequence(session.codec.default_monitor())
-        answered = False
-        for read in sequence:
-            reply = await session.poll(address, read)
-            if reply is not None:
-                answered = True
-                fleet.drive_replied(plan.name, drive, reply, session.clock.now(), None)
-        if not answered:
+        reads = len(session.codec.poll_sequence(session.codec.default_monitor()))
+        # Demoted (and the round over) only when a whole round went unanswered.
+        plan = replace(plan, offline_after=reads)
+        fleet = FleetState((plan,), emit=lambda event: None, clock=session.clock)
+        observer = _OneRound(fleet, reads)
+        master = session.master(plan, observer)
+        observer.stats = master.stats.drives[drive.name]
+        async with master:
+            await observer.over.wait()
+        if not observer.replies:
             raise BusError(f"no reply from address {address} on {options.port}", address=address)
     state = fleet.get(plan.name, drive.name)
     assert state is not None
@@ -316,7 +328,8 @@ async def control(
     command = Command(action=verb, reference_pct=pct, actor="cli")
     async with _Session(plan) as session:
         _check_address(session.codec, address)
-        result = await _carry_out(session, Planner(plan, session.codec), drive.name, command)
+        async with session.master(plan) as master:
+            result = await master.execute(drive.name, command)
     if result.outcome is Outcome.DONE:
         print(f"{action}: done")
         if verb in (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE):
@@ -334,26 +347,44 @@ async def control(
     return 1  # pragma: no cover - raise_for_outcome raises for every other outcome
 
 
-async def _carry_out(session: _Session, planner: Planner, name: str, command: Command) -> (
-    CommandResult
-):  # fmt: skip
-    ticket = object()
-    for completion in planner.submit(name, command, ticket):
-        if ticket in completion.tickets:
-            return completion.result
-    while True:
-        step = planner.next_step(session.clock.now())
-        # The command heads the queue until it is acknowledged; a start or stop then waits
-        # for the drive's status to show its result, which the polls bring.
-        assert step is not None
-        reply = await session.link.transact(step.exchange)
-        now = session.clock.now()
-        if not step.exchange.expects_reply:
-            report = planner.on_sent(step, now)
-        elif reply is None:
-            report = planner.on_failure(step, now, f"no reply from {name}")
-        else:
-            report = planner.on_reply(step, reply, now)
-        for completion in report.completions:
-            if ticket in completion.tickets:
-                return completion.result
+class _OneRound:
+    """A status's observer: fills the fleet state and tells when the poll round is over.
+
+    The round is over when each item of the drive's poll round was asked once, when the
+    drive was demoted for a whole round unanswered, or when the port was lost. Replies
+    reach an observer just after the next request is written, so the round is over one
+    transaction after its last poll: the state then holds every answer of the round.
+    """
+
+    def __init__(self, fleet: FleetState, reads: int) -> None:
+        self.fleet = fleet
+        self.reads = reads
+        self.replies = 0
+        self.stats = DriveStats()  # the master's own, once it runs
+        self.over = asyncio.Event()
+
+    def drive_replied(
+        self, bus: str, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
+    ) -> None:
+        """Fill the state; the round is over once every poll of it was answered or lost."""
+        self.fleet.drive_replied(bus, drive, reply, at, commanded)
+        self.replies += 1
+        if self.replies + self.stats.timeouts >= self.reads:
+            self.over.set()
+
+    def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
+        """A drive demoted after a whole round unanswered: the round is over."""
+        self.fleet.drive_availability(bus, drive, online, at)
+        if not online:
+            self.over.set()
+
+    def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
+        """A lost port ends the round with what it brought."""
+        self.fleet.line_availability(bus, up, reason, at)
+        if not up:
+            self.over.set()
+
+    def command_completed(
+        self, bus: str, drive: str, command: Command, result: CommandResult
+    ) -> None:
+        """No command is given during a status."""
