@@ -63,6 +63,9 @@ class LinePlan:
     address_encoding: str = "hex"
     response_encoding: str = "hex"
     fault_encoding: str = "hex"
+    # (key, value) of the line keys of protocols that have no field above; a protocol's
+    # spec reads its options from the fields and these (ProtocolSpec.options_of)
+    protocol_options: tuple[tuple[str, int | str | None], ...] = ()
     drives: tuple[DrivePlan, ...] = field(default=())
 
     @property
