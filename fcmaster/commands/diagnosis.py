@@ -32,7 +32,7 @@ class LineFormat:
     baudrate: int
     parity: str
     stopbits: int
-    address_format: int | None = None  # danfoss-fc only
+    address_format: int | None = None  # None: the protocol has no address_format key
 
     @property
     def character_format(self) -> str:
@@ -40,7 +40,7 @@ class LineFormat:
         return f"{self.baudrate} 8{self.parity}{self.stopbits}"
 
     def text(self) -> str:
-        """``danfoss-fc 19200 8E1`` (and the FC address format)."""
+        """``<protocol> 19200 8E1`` (and the address format where the protocol has one)."""
         fmt = f"{self.protocol} {self.baudrate} 8{self.parity}{self.stopbits}"
         return (
             fmt if self.address_format is None else f"{fmt}, address format {self.address_format}"

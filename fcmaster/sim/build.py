@@ -13,7 +13,7 @@ import importlib
 import random
 from collections.abc import Iterable, Mapping
 from functools import partial
-from typing import Final
+from typing import Any, Final
 
 from fcmaster.clock import Clock
 from fcmaster.errors import UsageError
@@ -23,7 +23,7 @@ from fcmaster.sim.line import SimLine
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.sim.simulator import DriveFactory, SimProtocol
 
-__all__ = ["SIM_PROTOCOLS", "DriveFactory", "SimProtocol", "build_line"]
+__all__ = ["SIM_PROTOCOLS", "DriveFactory", "SimProtocol", "build_line", "simulated_keys"]
 
 
 def _resolve(reference: str) -> SimProtocol:
@@ -37,6 +37,16 @@ def _resolve(reference: str) -> SimProtocol:
 SIM_PROTOCOLS: Final[Mapping[str, SimProtocol]] = {
     name: _resolve(spec.simulator) for name, spec in PROTOCOLS.items()
 }
+
+
+def simulated_keys(source: object) -> dict[str, Any]:
+    """The line keys the simulated drives take (``LineKey.simulated``), as ``source`` has them."""
+    return {
+        key.name: getattr(source, key.name)
+        for spec in PROTOCOLS.values()
+        for key in spec.line_keys
+        if key.simulated and hasattr(source, key.name)
+    }
 
 
 def build_line(
