@@ -71,7 +71,7 @@ def protocol_options(
         keys = [key for key in spec.line_keys if only(key)]
         if not keys:
             continue
-        group = parser.add_argument_group(f"{spec.name} lines")
+        group = parser.add_argument_group(f"options of {spec.name} lines")
         for key in keys:
             flag = "--" + key.name.replace("_", "-")
             if key.choices:

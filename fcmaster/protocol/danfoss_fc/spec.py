@@ -42,7 +42,7 @@ SPEC: Final[ProtocolSpec[FcOptions]] = ProtocolSpec(
             name="address_format",
             default=126,
             choices=(31, 126),
-            help="danfoss-fc: how telegrams write the address, 1-31 or 1-126 (default 126)",
+            help="how telegrams write the address, 1-31 or 1-126 (default 126)",
         ),
     ),
     new_codec=_codec,

@@ -59,7 +59,7 @@ def _encoding(what: str) -> LineKey:
         name=f"{what}_encoding",
         default="hex",
         choices=("hex", "decimal"),
-        help=f"enc: how the drives write {what} numbers (default hex)",
+        help=f"how the drives write {what} numbers (default hex)",
         simulated=True,
     )
 

@@ -55,7 +55,7 @@ SPEC: Final[ProtocolSpec[MitsubishiOptions]] = ProtocolSpec(
             name="terminator",
             default="cr",
             choices=("none", "cr", "crlf"),
-            help="mitsubishi: as the drives' Pr.124 (default cr)",
+            help="as the drives' Pr.124 (default cr)",
         ),
         LineKey(
             name="wait_time_ms",
@@ -65,7 +65,7 @@ SPEC: Final[ProtocolSpec[MitsubishiOptions]] = ProtocolSpec(
             step=10,
             nullable=True,
             metavar="MS|none",
-            help="mitsubishi: the waiting time each request carries, 0-150 in steps of 10 "
+            help="the waiting time each request carries, 0-150 in steps of 10 "
             "(default 0); none when the drives' Pr.123 sets it",
         ),
     ),
