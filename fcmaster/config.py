@@ -10,48 +10,76 @@ Loading happens in three passes, and every pass reports *every* problem it finds
    monitor parameters that the protocol can address, limits that make sense.
 
 The result is a :class:`Config` whose lines are :class:`~fcmaster.bus.plan.LinePlan`
-dataclasses; nothing below ``service`` ever sees pydantic.
+dataclasses; nothing below ``service`` ever sees pydantic. The adapter sections' models
+live in :mod:`fcmaster.config_sections`, the YAML helpers in :mod:`fcmaster.config_yaml`;
+a protocol's own line keys (``address_format``, ``terminator``, …) and the protocol names
+come from the protocol specs (:mod:`fcmaster.protocol.registry`).
 """
 
 from __future__ import annotations
 
 import contextlib
-import ipaddress
+import dataclasses
 import os
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
-from urllib.parse import urlsplit
+from typing import TYPE_CHECKING, Any, Literal
 
 import yaml
 from pydantic import (
-    AfterValidator,
     BaseModel,
-    ConfigDict,
     Field,
     TypeAdapter,
     ValidationError,
-    field_validator,
-    model_validator,
+    create_model,
 )
 
 from fcmaster.adapters.auth import listen_problem
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.config_sections import (
+    HttpModel,
+    LoggingModel,
+    MetricsModel,
+    ModbusModel,
+    MqttModel,
+    TlsModel,
+    TokenModel,
+    is_loopback,
+    modbus_listen,
+)
+from fcmaster.config_sections import StrictModel as _Model
+from fcmaster.config_values import check_name, port_url_problem
+from fcmaster.config_yaml import describe_error, substitute
 from fcmaster.errors import ConfigError, UsageError
-from fcmaster.protocol.codec import DriveCodec
+from fcmaster.protocol.registry import DEFAULT, NAMES, line_keys, spec_for
+from fcmaster.protocol.spec import LineKey
 
-# Port URLs the master can drive: the simulator, serial device servers (raw TCP, RFC 2217)
-# and pyserial's local helpers; anything else would fail only when the line first opens.
-_PORT_SCHEMES = ("sim", "socket", "rfc2217", "loop", "spy", "hwgrep", "alt")
-_ENC_KEYS = ("address_encoding", "response_encoding", "fault_encoding")
-_ENV = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-([^}]*))?\}")
+__all__ = [
+    "BusFields",
+    "BusModel",
+    "Config",
+    "ConfigModel",
+    "DriveModel",
+    "HttpModel",
+    "LoggingModel",
+    "MetricsModel",
+    "ModbusModel",
+    "MqttModel",
+    "TlsModel",
+    "TokenModel",
+    "load",
+    "modbus_listen",
+    "modbus_units",
+    "parse",
+]
 
-
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+if TYPE_CHECKING:
+    ProtocolName = str
+else:  # the registry's names, checked as a Literal so a wrong one lists the right ones
+    ProtocolName = Literal[NAMES]
 
 
 class DriveModel(_Model):
@@ -70,17 +98,16 @@ class DriveModel(_Model):
     confirm_s: float | None = Field(default=None, gt=0, le=600)
 
 
-class BusModel(_Model):
-    """One line under ``buses``."""
+class BusFields(_Model):
+    """One line under ``buses``: the keys every protocol has (see :data:`BusModel`)."""
 
     name: str = Field(min_length=1)
     port: str = Field(min_length=1)
-    protocol: Literal["danfoss-fc", "mitsubishi", "enc"] = "danfoss-fc"
+    protocol: ProtocolName = DEFAULT
     baudrate: int = Field(default=19200, gt=0)
     parity: Literal["N", "E", "O"] = "E"
     stopbits: Literal[1, 2] = 1
     databits: Literal[7, 8] = 8
-    address_format: Literal[31, 126] = 126
     timeout_s: float | None = Field(default=None, gt=0)
     retries: int = Field(default=1, ge=0, le=10)
     pause_s: float | None = Field(default=None, ge=0)
@@ -91,157 +118,29 @@ class BusModel(_Model):
     probe_share: float = Field(default=0.1, gt=0, le=0.5)
     echo: bool = False
     rs485: bool = False
-    terminator: Literal["none", "cr", "crlf"] = "cr"  # mitsubishi: as the drive's Pr.124
-    # mitsubishi: the waiting-time digit every request carries (0-150 ms in 10 ms steps), or
-    # null when the drives' Pr.123 sets it and requests leave it out
-    wait_time_ms: int | None = Field(default=0, ge=0, le=150, multiple_of=10)
-    # enc: how the drives write addresses of 10 and above, response codes and fault codes
-    # (protocols/enc.md §10 questions 1, 2 and 7); replies are read in either encoding
-    address_encoding: Literal["hex", "decimal"] = "hex"
-    response_encoding: Literal["hex", "decimal"] = "hex"
-    fault_encoding: Literal["hex", "decimal"] = "hex"
     simulation: dict[str, Any] | None = None  # sim:// ports: what the simulated drives do
     drives: list[DriveModel] = Field(default_factory=list)
 
 
-class TokenModel(_Model):
-    """A bearer token and the role it grants."""
-
-    name: str = Field(min_length=1)
-    role: Literal["viewer", "operator"]
-    token: str = Field(min_length=16)
-
-
-class HttpModel(_Model):
-    """The HTTP API, dashboard and metrics listener."""
-
-    listen: str = "127.0.0.1:8080"
-    tokens: list[TokenModel] = Field(default_factory=list)
-    anonymous: Literal["none", "viewer"] = "none"
-    cors_origins: list[str] = Field(default_factory=list)
+def _line_key_field(key: LineKey) -> Any:
+    """A protocol's own line key as a pydantic field: its allowed values and default."""
+    if key.choices:
+        return (Literal[key.choices], key.default)  # Literal[(31, 126)] is Literal[31, 126]
+    number = Field(default=key.default, ge=key.minimum, le=key.maximum, multiple_of=key.step)
+    return (int | None if key.nullable else int, number)
 
 
-class TlsModel(_Model):
-    """TLS for the MQTT connection."""
-
-    ca: str | None = None
-    cert: str | None = None
-    key: str | None = None
-    insecure: bool = False
-
-
-class MqttModel(_Model):
-    """The MQTT bridge."""
-
-    url: str = "mqtt://127.0.0.1:1883"  # mqtt://host[:1883] or mqtts://host[:8883]
-    base_topic: str = "fcmaster"
-    status_topic: str | None = None  # None: {base_topic}/status; one per gateway on a shared base
-    client_id: str | None = None
-    username: str | None = None
-    password: str | None = None
-    tls: TlsModel | None = None
-    heartbeat_s: float = Field(default=60.0, gt=0)
-    deadband_pct: float = Field(default=0.5, ge=0)
-    discovery: bool = False
-    discovery_prefix: str = "homeassistant"
-    keepalive_s: int = Field(default=30, ge=5, le=3600)
-    reconnect_min_s: float = Field(default=1.0, gt=0)
-    reconnect_max_s: float = Field(default=60.0, gt=0)
-    # Commands over MQTT: off unless switched on; then each payload carries an operator
-    # token of http.tokens ("token"), unless the broker's ACLs alone decide who may publish.
-    commands: bool = False
-    trust_broker: bool = False
-
-    @field_validator("url")
-    @classmethod
-    def _check_url(cls, url: str) -> str:
-        parts = urlsplit(url)
-        if parts.scheme not in ("mqtt", "mqtts"):
-            raise ValueError("use mqtt://host:port or mqtts://host:port")
-        if not parts.hostname:
-            raise ValueError("the URL names no host")
-        if parts.username is not None or parts.password is not None:
-            raise ValueError("put credentials in mqtt.username and mqtt.password")
-        _ = parts.port  # raises ValueError for a port that is not a number in range
-        return url
-
-    @model_validator(mode="after")
-    def _check_tls(self) -> MqttModel:
-        if self.tls is not None and urlsplit(self.url).scheme != "mqtts":
-            raise ValueError("a tls section needs an mqtts:// url (mqtt:// is plain TCP)")
-        if self.tls is not None and self.tls.key is not None and self.tls.cert is None:
-            raise ValueError("tls.key belongs to a client certificate: give tls.cert too")
-        if self.reconnect_min_s > self.reconnect_max_s:
-            raise ValueError("reconnect_min_s is above reconnect_max_s")
-        return self
-
-    @field_validator("base_topic", "status_topic", "discovery_prefix")
-    @classmethod
-    def _check_topic(cls, topic: str | None) -> str | None:
-        if topic is not None and (
-            not topic.strip("/") or set(topic) & {"+", "#"} or topic != topic.strip("/")
-        ):
-            raise ValueError("a topic without wildcards (+, #) or a leading or trailing /")
-        return topic
-
-
-def _cidr(text: str) -> str:
-    try:
-        ipaddress.ip_network(text, strict=False)
-    except ValueError:
-        raise ValueError(f"{text!r} is not an address or network like 10.0.0.0/8") from None
-    return text
-
-
-class ModbusModel(_Model):
-    """The Modbus TCP server for PLCs and SCADA (read-only unless ``commands: true``)."""
-
-    listen: str = "127.0.0.1:5020"
-    # Who may connect (addresses or CIDR networks); None: this machine only. Modbus has no
-    # authentication, so listening beyond loopback needs this list.
-    allow: list[Annotated[str, AfterValidator(_cidr)]] | None = None
-    commands: bool = False
-
-    @field_validator("listen")
-    @classmethod
-    def _check_listen(cls, listen: str) -> str:
-        host, port = modbus_listen(listen)
-        if not host or port is None or not 0 <= port <= 65535:
-            raise ValueError("write it like 127.0.0.1:5020 or [::1]:5020")
-        return listen
-
-
-def modbus_listen(text: str) -> tuple[str, int | None]:
-    """``"127.0.0.1:5020"`` or ``"[::1]:5020"`` → host and port (None if not a number)."""
-    text = text.strip()
-    if text.startswith("["):
-        host, _, rest = text[1:].partition("]")
-        port = rest[1:] if rest.startswith(":") else ""
-    else:
-        host, _, port = text.rpartition(":") if text.count(":") == 1 else (text, "", "")
-    return host, int(port) if port.isdigit() else None
-
-
-def _is_loopback(host: str) -> bool:
-    if host.lower() == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-class MetricsModel(_Model):
-    """Prometheus metrics at /metrics on the HTTP listener."""
-
-    enabled: bool = True
-
-
-class LoggingModel(_Model):
-    """Log level and format (auto: console on a terminal, JSON otherwise)."""
-
-    level: Literal["debug", "info", "warning", "error"] = "info"
-    format: Literal["auto", "json", "console"] = "auto"
+if TYPE_CHECKING:
+    BusModel = BusFields
+else:
+    # One line under ``buses``: the common keys plus every protocol's own line keys (a bus
+    # of another protocol that sets one is told so by the meaning pass).
+    BusModel = create_model(
+        "BusModel",
+        __base__=BusFields,
+        __doc__="One line under ``buses``.",
+        **{key.name: _line_key_field(key) for key, _ in line_keys()},
+    )
 
 
 class ConfigModel(_Model):
@@ -296,7 +195,7 @@ def parse(
     if not isinstance(data, dict):
         raise ConfigError([("(top)", "the file must be a mapping with a 'buses' list")])
     unset: list[tuple[str, str]] = []
-    data = _substitute(data, "", os.environ if env is None else env, unset)
+    data = substitute(data, "", os.environ if env is None else env, unset)
     problems: list[tuple[str, str]] = []
     if buses_only:  # stand-ins long enough to pass validation; never used
         unset = [p for p in unset if p[0] == "buses" or p[0].startswith(("buses.", "buses["))]
@@ -304,7 +203,7 @@ def parse(
     try:
         model = ConfigModel.model_validate(data)
     except ValidationError as exc:
-        problems = [_describe(error) for error in exc.errors()]
+        problems = [describe_error(error) for error in exc.errors()]
         # Check the meaning of whatever parts are well-formed too, so that a wrong type in
         # one bus does not hide an address out of range in another until it is fixed.
         salvaged = _salvage(data)
@@ -377,53 +276,6 @@ def _valid(model: type[BaseModel], value: Any) -> bool:
     return True
 
 
-def _substitute(value: Any, path: str, env: Any, problems: list[tuple[str, str]]) -> Any:
-    if isinstance(value, str):
-
-        def replace(match: re.Match[str]) -> str:
-            name, default = match[1], match[2]
-            if name in env:
-                return str(env[name])
-            if default is not None:
-                return default
-            problems.append((path or "(top)", f"environment variable {name} is not set"))
-            return f"unset-{name}".ljust(_UNSET_LENGTH, "-")
-
-        return _ENV.sub(replace, value)
-    if isinstance(value, dict):
-        return {k: _substitute(v, _join(path, k), env, problems) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_substitute(v, f"{path}[{i}]", env, problems) for i, v in enumerate(value)]
-    return value
-
-
-_UNSET_LENGTH = 32  # an unset variable's stand-in passes a token's length check
-
-
-def _join(path: str, key: object) -> str:
-    return f"{path}.{key}" if path else str(key)
-
-
-def _location(loc: tuple[int | str, ...]) -> str:
-    out = ""
-    for part in loc:
-        out = f"{out}[{part}]" if isinstance(part, int) else _join(out, part)
-    return out or "(top)"
-
-
-def _describe(error: Any) -> tuple[str, str]:
-    loc = tuple(p for p in error["loc"] if not (isinstance(p, str) and p.startswith("function-")))
-    kind, given = error["type"], error.get("input")
-    if kind == "extra_forbidden":
-        return _location(loc), "unknown key"
-    if kind == "missing":
-        return _location(loc), "required key is missing"
-    if kind == "literal_error":
-        expected = error.get("ctx", {}).get("expected", "")
-        return _location(loc), f"{given!r} is not one of {expected}"
-    return _location(loc), f"{error['msg'].lower()} (got {given!r})"
-
-
 def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePlan, ...]:
     lines: list[LinePlan] = []
     drive_names: dict[str, str] = {}
@@ -433,9 +285,10 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
         where = f"buses[{b}]"
         _unique(bus_names, bus.name, f"{where}.name", "bus name", problems)
         _unique(ports, bus.port, f"{where}.port", "port", problems)
-        port_problem = _port_problem(bus.port)
+        port_problem = port_url_problem(bus.port)
         if port_problem:
             problems.append((f"{where}.port", port_problem))
+        spec = spec_for(bus.protocol)
         codec = codec_for(_line(bus, ()))
         addresses: dict[str, str] = {}
         drives: list[DrivePlan] = []
@@ -443,7 +296,7 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
             at = f"{where}.drives[{d}]"
             _unique(drive_names, drive.name, f"{at}.name", "drive name", problems)
             if drive.address not in codec.addresses:
-                problems.append((f"{at}.address", _bad_address(bus, drive.address, codec)))
+                problems.append((f"{at}.address", spec.bad_address(bus, drive.address)))
             else:
                 _unique(addresses, str(drive.address), f"{at}.address", "address", problems)
             for m, parameter in enumerate(drive.monitor or ()):
@@ -473,25 +326,18 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                     confirm_s=drive.confirm_s,
                 )
             )
-        if bus.protocol != "danfoss-fc" and "address_format" in bus.model_fields_set:
-            problems.append((f"{where}.address_format", "only danfoss-fc lines have one"))
-        for key in _ENC_KEYS:
-            if bus.protocol != "enc" and key in bus.model_fields_set:
-                problems.append((f"{where}.{key}", "only enc lines have one"))
-        for key in ("terminator", "wait_time_ms"):
-            if bus.protocol != "mitsubishi" and key in bus.model_fields_set:
-                problems.append((f"{where}.{key}", "only mitsubishi lines have one"))
+        problems.extend(_foreign_keys(bus, where))
         lines.append(_line(bus, tuple(drives)))
     # Names are HTTP path segments (/api/v1/drives/{name}) and MQTT topic levels
     # ({base}/{bus}/{drive}/state) whichever surfaces are on today: a name must work on all.
     for b, bus in enumerate(model.buses):
-        _addressable(bus.name, f"buses[{b}].name", problems)
+        check_name(bus.name, f"buses[{b}].name", problems)
         for d, drive in enumerate(bus.drives):
-            _addressable(drive.name, f"buses[{b}].drives[{d}].name", problems)
+            check_name(drive.name, f"buses[{b}].drives[{d}].name", problems)
     if model.modbus is not None:
         modbus_units(model, problems)
         host, _ = modbus_listen(model.modbus.listen)
-        if not model.modbus.allow and not _is_loopback(host):  # [] lets no PLC in either
+        if not model.modbus.allow and not is_loopback(host):  # [] lets no PLC in either
             problems.append(
                 (
                     "modbus.listen",
@@ -574,7 +420,11 @@ def modbus_units(model: ConfigModel, problems: list[tuple[str, str]]) -> dict[st
     return units
 
 
+_PLAN_FIELDS = frozenset(field.name for field in dataclasses.fields(LinePlan))
+
+
 def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
+    keys = {key.name: getattr(bus, key.name) for key, _ in line_keys()}
     plan = LinePlan(
         name=bus.name,
         port=bus.port,
@@ -583,7 +433,6 @@ def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
         parity=bus.parity,
         stopbits=bus.stopbits,
         databits=bus.databits,
-        address_format=bus.address_format,
         timeout_s=bus.timeout_s,
         retries=bus.retries,
         pause_s=bus.pause_s,
@@ -593,36 +442,17 @@ def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
         probe_share=bus.probe_share,
         echo=bus.echo,
         rs485=bus.rs485,
-        terminator=bus.terminator,
-        wait_time_ms=bus.wait_time_ms,
-        address_encoding=bus.address_encoding,
-        response_encoding=bus.response_encoding,
-        fault_encoding=bus.fault_encoding,
         drives=drives,
+        # every protocol's own keys (each bus model has them all, with their defaults): as
+        # the plan's fields where it has them, else among its protocol_options
+        **{name: value for name, value in keys.items() if name in _PLAN_FIELDS},
+        protocol_options=tuple((n, v) for n, v in keys.items() if n not in _PLAN_FIELDS),
     )
     if "response_delay_ms" in bus.model_fields_set:
         return plan
     # Where the protocol says how long its drives may take (Mitsubishi: the waiting time
     # plus the data check), the reply deadline is derived from it.
     return with_protocol_delay(plan)
-
-
-def _port_problem(port: str) -> str:
-    """What is wrong with a port URL ("" for a device path or a URL the master can open)."""
-    scheme, separator, _rest = port.partition("://")
-    if not separator:
-        return ""
-    if scheme not in _PORT_SCHEMES:
-        listed = ", ".join(f"{s}://" for s in _PORT_SCHEMES)
-        return f"{scheme}:// is not a port this master can open (use a device path or {listed})"
-    if scheme in ("socket", "rfc2217"):
-        try:
-            parts = urlsplit(port)
-            if not parts.hostname or parts.port is None:
-                raise ValueError
-        except ValueError:
-            return f"use {scheme}://host:port (got {port!r})"
-    return ""
 
 
 def _unique(
@@ -634,31 +464,13 @@ def _unique(
         seen[value] = path
 
 
-_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
-
-
-def _addressable(name: str, path: str, problems: list[tuple[str, str]]) -> None:
-    """A drive or bus name every surface can address: no /, +, #, %, spaces, ``..``."""
-    if not _NAME.fullmatch(name):
-        problems.append(
-            (
-                path,
-                f"{name!r} cannot be addressed over HTTP and MQTT: use 1-64 letters, digits, "
-                "'-', '_' and '.', starting with a letter or digit",
-            )
-        )
-
-
-def _bad_address(bus: BusModel, address: int, codec: DriveCodec) -> str:
-    reason = f"{address} is outside {_span(codec.addresses)}"
-    if bus.protocol == "enc" and address in (0, 127):
-        # F2.15 allows 0-127, but fcmaster sends its broadcasts to 127 and means broadcast
-        # by address 0 between its layers, so neither can name one drive.
-        return f"{reason}: set the drive's F2.15 to another address (0 and 127 are broadcast)"
-    if bus.protocol == "enc" and bus.address_encoding == "decimal":
-        return f"{reason}: with address_encoding decimal an address has two decimal digits"
-    return reason
-
-
-def _span(addresses: range) -> str:
-    return f"{addresses.start}-{addresses.stop - 1}"
+def _foreign_keys(bus: BusModel, where: str) -> list[tuple[str, str]]:
+    """Keys set on ``bus`` that belong to other protocols than its own."""
+    owners: dict[str, list[str]] = {}
+    for key, spec in line_keys():
+        owners.setdefault(key.name, []).append(spec.name)
+    return [
+        (f"{where}.{name}", f"only {' or '.join(names)} lines have one")
+        for name, names in owners.items()
+        if bus.protocol not in names and name in bus.model_fields_set
+    ]

@@ -6,23 +6,12 @@ the fleet state (``fcmaster.state``) makes a new one when a reply changes someth
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
 from fcmaster.protocol.codec import Condition
-from fcmaster.protocol.danfoss_fc import StatusWord
-from fcmaster.protocol.enc import StateWord
-from fcmaster.protocol.mitsubishi import StatusBits
-
-# Each protocol's status word, bit by bit, as its manual names the bits (for people: the
-# normalised flags beside it are what programs should use).
-_STATUS_BITS: dict[str, type[enum.IntFlag]] = {
-    "danfoss-fc": StatusWord,
-    "mitsubishi": StatusBits,
-    "enc": StateWord,
-}
+from fcmaster.protocol.registry import PROTOCOLS
 
 
 @dataclass(slots=True, frozen=True)
@@ -84,9 +73,11 @@ class DriveState:
     @property
     def status_bits(self) -> list[str]:
         """The names of the status word's set bits, as the protocol's manual names them."""
-        flags = _STATUS_BITS.get(self.protocol)
-        if flags is None or self.status_word is None:
+        # For people: the normalised flags beside it are what programs should use.
+        spec = PROTOCOLS.get(self.protocol)
+        if spec is None or self.status_word is None:
             return []
+        flags = spec.status_bits
         return [str(f.name).lower() for f in flags if f.value and self.status_word & f.value]
 
     def to_json(self) -> dict[str, Any]:

@@ -20,11 +20,11 @@ from typing import Any
 import fcmaster
 from fcmaster.adapters.mqtt_topics import Topics
 from fcmaster.bus.plan import DrivePlan
+from fcmaster.protocol.registry import PROTOCOLS
 from fcmaster.state import DriveState
 
 HA_COMMAND_ID = "homeassistant"  # the id commands from Home Assistant's entities carry
 
-_MANUFACTURERS = {"danfoss-fc": "Danfoss", "mitsubishi": "Mitsubishi Electric", "enc": "ENC"}
 _UNITS: dict[str, tuple[str | None, str, str]] = {  # unit → device class, state class, label
     "Hz": ("frequency", "measurement", "Frequency"),
     "A": ("current", "measurement", "Current"),
@@ -116,7 +116,7 @@ class Discovery:
             "device": {
                 "identifiers": [node],
                 "name": state.name,
-                "manufacturer": _MANUFACTURERS.get(state.protocol, state.protocol),
+                "manufacturer": _manufacturer(state.protocol),
                 "model": f"{state.protocol} drive, address {state.address} on {state.bus}",
             },
             "origin": {"name": "fcmaster", "sw_version": fcmaster.__version__},
@@ -193,3 +193,8 @@ class Discovery:
             device_class="frequency",
             mode="box",
         )
+
+
+def _manufacturer(protocol: str) -> str:
+    spec = PROTOCOLS.get(protocol)
+    return spec.manufacturer if spec else protocol

@@ -31,8 +31,7 @@ from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.config import Config, modbus_units
 from fcmaster.errors import ConfigError
-from fcmaster.protocol import danfoss_fc, enc, mitsubishi
-from fcmaster.protocol.codec import ParameterKey
+from fcmaster.protocol.registry import spec_for
 from fcmaster.state import DriveState
 
 ACTIONS: Final = {  # the `command` register's action codes (DESIGN.md "Modbus TCP")
@@ -258,7 +257,7 @@ def _value_registers(line: LinePlan, drive: DrivePlan) -> list[Register]:
             # bit 31 set) shows as its two's complement, so DWORD access sees every bit.
             return measured.raw - (1 << 32) if measured.raw >= 1 << 31 else measured.raw
 
-        unit = _unit_of(line.protocol, key)
+        unit = spec_for(line.protocol).parameters.unit_of(key)
         registers.append(
             Register(table="input", address=address, name=key.name, type="f32", unit=unit,
                      read=_fresh(value))
@@ -268,12 +267,3 @@ def _value_registers(line: LinePlan, drive: DrivePlan) -> list[Register]:
                      read=_fresh(raw))
         )  # fmt: skip
     return registers
-
-
-def _unit_of(protocol: str, key: ParameterKey) -> str:
-    """The unit a parameter's values come in (as the codec reports them when read)."""
-    if protocol == "danfoss-fc":
-        return danfoss_fc.lookup(key.code).unit
-    if protocol == "mitsubishi":
-        return mitsubishi.resolve(key).unit
-    return enc.lookup(key.code).unit

@@ -23,13 +23,10 @@ from fcmaster.bus.commands import Action, CommandResult, Outcome
 from fcmaster.bus.steps import DriveSlot, Pending, result_of
 from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import DriveCodec, ParameterKey, Reply
+from fcmaster.protocol.registry import spec_for
 
 CONFIRM_DEFAULT_S = 5.0  # a few seconds: a start shows at once, most stops take less
 RAMP_GRACE_S = 2.0  # beyond the deceleration time: start delays, load, the poll round
-# The acceleration and deceleration times of protocols that can poll them (in seconds,
-# from 0 to the drive's nominal or maximum frequency). Mitsubishi's Pr.7/Pr.8 need a page
-# selected first, which a poll cannot do: those drives use the default or confirm_s.
-RAMP_PARAMETERS = {"danfoss-fc": ("3-41", "3-42"), "enc": ("F0.08", "F0.09")}
 # The running state each confirmed action must show.
 SHOWS_RUNNING = {
     Action.START: True,
@@ -48,7 +45,9 @@ def needs_confirmation(pending: Pending) -> bool:
 
 def ramp_keys(codec: DriveCodec) -> tuple[ParameterKey, ParameterKey] | None:
     """The drive's acceleration and deceleration parameters, where a poll can read them."""
-    names = RAMP_PARAMETERS.get(codec.protocol)
+    # In seconds, from 0 to the drive's nominal or maximum frequency; a protocol whose ramp
+    # times a poll cannot read has none, and its drives use the default or confirm_s.
+    names = spec_for(codec.protocol).ramp_parameters
     if names is None:
         return None
     try:

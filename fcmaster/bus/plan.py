@@ -10,6 +10,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
+from fcmaster.protocol.registry import DEFAULT
+
 
 class OnStart(enum.StrEnum):
     """How the master takes a ``control: bus`` drive over."""
@@ -40,12 +42,12 @@ class LinePlan:
 
     name: str
     port: str
-    protocol: str = "danfoss-fc"
+    protocol: str = DEFAULT  # a registered protocol's name (fcmaster.protocol.registry)
     baudrate: int = 19200
     parity: str = "E"  # N | E | O
     stopbits: int = 1
     databits: int = 8
-    address_format: int = 126  # danfoss-fc only
+    address_format: int = 126  # a protocol's own line key (ProtocolSpec.line_keys): 31 | 126
     timeout_s: float | None = None  # None: derived from baud and reply length
     retries: int = 1  # extra attempts for a command
     pause_s: float | None = None  # None: the protocol's own minimum (codec.min_pause_s)
@@ -55,14 +57,15 @@ class LinePlan:
     probe_share: float = 0.1  # the most of the line's time probes may take while drives answer
     echo: bool = False  # the adapter hears its own transmission
     rs485: bool = False  # kernel RS-485 mode (RTS drives the transmitter)
-    terminator: str = "cr"  # mitsubishi: none | cr | crlf, as the drives' Pr.124
-    # mitsubishi: the waiting time each request carries (drives at Pr.123 = 9999, the
-    # factory setting); None = requests leave it out because the drives' Pr.123 sets it
-    wait_time_ms: int | None = 0
-    # enc: how the drives write addresses ≥ 10, response codes and fault codes (hex | decimal)
-    address_encoding: str = "hex"
+    # More protocols' own line keys, named as in the config; their specs say what they mean.
+    terminator: str = "cr"  # none | cr | crlf
+    wait_time_ms: int | None = 0  # None: requests leave the waiting time out
+    address_encoding: str = "hex"  # hex | decimal
     response_encoding: str = "hex"
     fault_encoding: str = "hex"
+    # (key, value) of the line keys of protocols that have no field above; a protocol's
+    # spec reads its options from the fields and these (ProtocolSpec.options_of)
+    protocol_options: tuple[tuple[str, int | str | None], ...] = ()
     drives: tuple[DrivePlan, ...] = field(default=())
 
     @property

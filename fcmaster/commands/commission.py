@@ -28,15 +28,8 @@ from fcmaster.clock import MonotonicClock
 from fcmaster.errors import BusError, CommandError, UsageError
 from fcmaster.protocol.codec import DriveCodec, Reply
 from fcmaster.protocol.drive import ControlIntent
+from fcmaster.protocol.registry import spec_for
 from fcmaster.state import FleetState
-
-# Factory line settings per protocol: baud rate, parity, stop bits.
-FACTORY: dict[str, tuple[int, str, int]] = {
-    "danfoss-fc": (9600, "E", 1),  # 8-32 / 8-33 defaults
-    "mitsubishi": (19200, "E", 2),  # Pr.118 / Pr.119 / Pr.120 defaults
-    "enc": (9600, "N", 1),  # F2.14 = 03
-}
-
 
 # The actions a --frequency or --reference means something to.
 _TAKES_REFERENCE = (Action.START, Action.SET_REFERENCE, Action.FORWARD, Action.REVERSE)
@@ -61,14 +54,14 @@ class LineOptions:
 
     def plan(self, drives: tuple[DrivePlan, ...] = ()) -> LinePlan:
         """A line plan with the protocol's factory settings where nothing was given."""
-        baudrate, parity, stopbits = FACTORY[self.protocol]
+        factory = spec_for(self.protocol).factory
         plan = LinePlan(
             name="cli",
             port=self.port,
             protocol=self.protocol,
-            baudrate=self.baudrate or baudrate,
-            parity=self.parity or parity,
-            stopbits=self.stopbits or stopbits,
+            baudrate=self.baudrate or factory.baudrate,
+            parity=self.parity or factory.parity,
+            stopbits=self.stopbits or factory.stopbits,
             address_format=self.address_format,
             timeout_s=self.timeout_s,
             terminator=self.terminator,

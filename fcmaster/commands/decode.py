@@ -3,38 +3,31 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
 from typing import Any
 
 from fcmaster.commands.frames import parse_hex
 from fcmaster.errors import UsageError
-from fcmaster.protocol.danfoss_fc import describe_telegram
-from fcmaster.protocol.enc.describe import describe_frame as describe_enc
-from fcmaster.protocol.mitsubishi.describe import describe_frame as describe_mitsubishi
-from fcmaster.protocol.mitsubishi.notation import parse_ascii_frame
-
-# protocol → (describe, the key that says whether the checksum held)
-_DESCRIBE: dict[str, tuple[Callable[..., dict[str, Any]], str]] = {
-    "danfoss-fc": (describe_telegram, "bcc_ok"),
-    "mitsubishi": (describe_mitsubishi, "sum_ok"),
-    "enc": (describe_enc, "checksum_ok"),
-}
+from fcmaster.protocol.registry import PROTOCOLS
+from fcmaster.protocol.spec import ProtocolSpec
 
 
 def run(protocol: str, frame_text: str, *, as_response: bool, as_json: bool) -> int:
     """Print the decode; return 0, or 1 when the checksum is wrong."""
-    if protocol not in _DESCRIBE:
+    spec = PROTOCOLS.get(protocol)
+    if spec is None:
         raise UsageError(f"unknown protocol {protocol!r}")
-    describe, checksum_key = _DESCRIBE[protocol]
-    decoded = describe(read_frame(frame_text), from_drive=as_response)
+    decoded = spec.describe(read_frame(frame_text, spec), from_drive=as_response)
     print(json.dumps(decoded, indent=2) if as_json else _table(decoded))
-    return 0 if decoded[checksum_key] else 1
+    return 0 if decoded[spec.checksum_key] else 1
 
 
-def read_frame(text: str) -> bytes:
-    """Hex bytes, or ASCII with control characters written <ENQ>, <CR>, … (ASCII protocols)."""
-    if "<" in text or "~" in text:
-        return parse_ascii_frame(text.strip())
+def read_frame(text: str, spec: ProtocolSpec[Any]) -> bytes:
+    """Hex bytes, or ASCII with control characters written <ENQ>, <CR>, ….
+
+    The ASCII notation is read where ``spec``'s protocol has one (the ASCII protocols).
+    """
+    if spec.parse_text is not None and ("<" in text or "~" in text):
+        return spec.parse_text(text.strip())
     return parse_hex(text)
 
 

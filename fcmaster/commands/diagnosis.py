@@ -13,22 +13,15 @@ from typing import Any, Final
 
 from fcmaster.bus.adapter import LOW_LATENCY_MS, UDEV_FILE, UDEV_RULE, Adapter
 from fcmaster.bus.adapter import max_transactions_per_s as adapter_limit
+from fcmaster.protocol.registry import PROTOCOLS, spec_for
 
 NOISE_MIN_BYTES: Final = 3  # fewer stray bytes than this are a glitch (a port opening), not noise
 # Answers later than the drives' factory delay by this much (median) are held somewhere: a
 # 16 ms USB latency timer holds a reply 8 ms on average, a pty or a 1 ms timer about 1 ms.
 SLOW_BY_S: Final = 0.005
 
-# Where each vendor's drive keeps the settings a finding asks to change.
-VENDOR_PARAMETERS: Final[dict[str, dict[str, str]]] = {
-    "danfoss-fc": {"address": "8-31", "baudrate": "8-32", "parity": "8-33", "delay": "8-35"},
-    "mitsubishi": {"address": "Pr.117", "baudrate": "Pr.118", "parity": "Pr.120",
-                   "delay": "Pr.123"},
-    "enc": {"address": "F2.15", "baudrate": "F2.14", "parity": "F2.14", "delay": "F2.17"},
-}  # fmt: skip
-# How long a drive takes to answer a status request at its factory settings: FC 8-35's
-# 10 ms, ENC F2.17's 5 ms, a Mitsubishi's data check time of a monitor (under 12 ms).
-DRIVE_DELAY_S: Final[dict[str, float]] = {"danfoss-fc": 0.010, "mitsubishi": 0.012, "enc": 0.005}
+# Where a drive keeps the settings a finding asks to change, and how long it takes to
+# answer a status request at its factory settings: ProtocolSpec.diagnosis.
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -39,7 +32,7 @@ class LineFormat:
     baudrate: int
     parity: str
     stopbits: int
-    address_format: int | None = None  # danfoss-fc only
+    address_format: int | None = None  # None: the protocol has no address_format key
 
     @property
     def character_format(self) -> str:
@@ -47,7 +40,7 @@ class LineFormat:
         return f"{self.baudrate} 8{self.parity}{self.stopbits}"
 
     def text(self) -> str:
-        """``danfoss-fc 19200 8E1`` (and the FC address format)."""
+        """``<protocol> 19200 8E1`` (and the address format where the protocol has one)."""
         fmt = f"{self.protocol} {self.baudrate} 8{self.parity}{self.stopbits}"
         return (
             fmt if self.address_format is None else f"{fmt}, address format {self.address_format}"
@@ -216,7 +209,8 @@ def _settings(survey: Survey, found: LineFormat) -> list[Finding]:
 
 
 def _duplicates(survey: Survey, found: LineFormat) -> list[Finding]:
-    parameter = VENDOR_PARAMETERS.get(found.protocol, {}).get("address", "its address parameter")
+    spec = PROTOCOLS.get(found.protocol)
+    parameter = spec.diagnosis.address if spec else "its address parameter"
     taken = set(survey.drives)
     findings = []
     for report in survey.addresses:
@@ -303,10 +297,11 @@ def _slow(survey: Survey) -> list[Finding]:
     turnaround_ms, found = survey.turnaround_ms, survey.found
     if turnaround_ms is None or found is None or "://" in survey.port:
         return []  # over a network the round trip is in it too: no measure of the line
-    factory_ms = DRIVE_DELAY_S[found.protocol] * 1000.0
+    diagnosis = spec_for(found.protocol).diagnosis
+    factory_ms = diagnosis.factory_delay_s * 1000.0
     if turnaround_ms - factory_ms < SLOW_BY_S * 1000.0:
         return []
-    parameter = VENDOR_PARAMETERS[found.protocol]["delay"]
+    parameter = diagnosis.delay
     return [
         Finding(
             "slow_replies",

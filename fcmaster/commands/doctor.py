@@ -34,7 +34,6 @@ from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock, MonotonicClock
-from fcmaster.commands.commission import FACTORY
 from fcmaster.commands.diagnosis import (
     AddressReport,
     Expected,
@@ -55,19 +54,10 @@ from fcmaster.errors import (
 )
 from fcmaster.protocol.codec import DriveCodec, Exchange
 from fcmaster.protocol.framing import Frame
+from fcmaster.protocol.registry import spec_for
 
-# The rates each vendor's drives offer, fastest first (FC 8-32, Mitsubishi Pr.118 on the
-# 800 series, ENC F2.14), and the parities (FC 8-33, Pr.120, F2.14), factory setting first.
-BAUDRATES: Final[dict[str, tuple[int, ...]]] = {
-    "danfoss-fc": (115200, 76800, 57600, 38400, 19200, 9600, 4800, 2400),
-    "mitsubishi": (115200, 76800, 57600, 38400, 19200, 9600, 4800),
-    "enc": (38400, 19200, 9600, 4800, 2400, 1200),
-}
-PARITIES: Final[dict[str, tuple[str, ...]]] = {
-    "danfoss-fc": ("E", "O", "N"),
-    "mitsubishi": ("E", "O", "N"),
-    "enc": ("N", "E", "O"),
-}
+# The rates each protocol's drives offer (fastest first) and the parities (factory first)
+# are its spec's baudrates and parities.
 PROBES_PER_SETTING: Final = 4  # addresses asked at each setting before moving on
 CONFIRM_ATTEMPTS: Final = 3  # attempts at an address where anything came back
 # Beyond the wire time and the drives' delay, how long to wait for a reply: room for a 16 ms
@@ -218,8 +208,10 @@ def settings_to_try(
     converter) each protocol is tried once, at the config's settings or its factory ones.
     """
     for protocol in protocols:
-        baudrate, parity, stopbits = FACTORY[protocol]
-        address_format = 126 if protocol == "danfoss-fc" else None
+        spec = spec_for(protocol)
+        baudrate, parity, stopbits = (spec.factory.baudrate, spec.factory.parity,
+                                      spec.factory.stopbits)  # fmt: skip
+        address_format = 126 if spec.owns_key("address_format") else None
         if not probe_format:
             if fixed is not None and fixed.line.protocol == protocol:
                 yield fixed.line
@@ -227,8 +219,8 @@ def settings_to_try(
                 yield LineFormat(protocol=protocol, baudrate=baudrate, parity=parity,
                                  stopbits=stopbits, address_format=address_format)  # fmt: skip
             continue
-        for baudrate in BAUDRATES[protocol]:
-            for parity in PARITIES[protocol]:
+        for baudrate in spec.baudrates:
+            for parity in spec.parities:
                 yield LineFormat(protocol=protocol, baudrate=baudrate, parity=parity,
                                  stopbits=stopbits, address_format=address_format)  # fmt: skip
 
@@ -278,7 +270,7 @@ async def examine(
             asked = _probe_list(prober.codec, probe, addresses)
             if await _anyone(prober, asked):
                 survey.found = fmt
-            elif fmt.protocol == "danfoss-fc":  # drives that know only the 31 format?
+            elif fmt.address_format == 126:  # drives that know only the 31 format?
                 fmt31, heard_until = _format31(fmt), prober.quiet_at
                 prober = _Prober(_plan(port, fmt31, timeout_s), transport, survey, clock)
                 prober.quiet_at = heard_until  # the same line: the pause still holds
@@ -352,7 +344,11 @@ def expected_from_config(config: Path, port: str) -> Expected:
             fmt = LineFormat(
                 protocol=plan.protocol, baudrate=plan.baudrate, parity=plan.parity,
                 stopbits=plan.stopbits,
-                address_format=plan.address_format if plan.protocol == "danfoss-fc" else None,
+                address_format=(
+                    plan.address_format
+                    if spec_for(plan.protocol).owns_key("address_format")
+                    else None
+                ),
             )  # fmt: skip
             return Expected(bus=plan.name, line=fmt, echo=plan.echo,
                             addresses=[d.address for d in plan.drives])  # fmt: skip

@@ -23,6 +23,7 @@ from fcmaster.config import load
 from fcmaster.errors import UsageError
 from fcmaster.protocol import pcapng
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line, parse_faults
+from fcmaster.sim.build import simulated_keys
 from fcmaster.sim.line import SimLine
 from fcmaster.sim.replay import replay_lines, replay_sim_line
 from fcmaster.sim.service import sim_settings
@@ -57,9 +58,7 @@ async def run(args: argparse.Namespace) -> int:
         parity=args.parity,
         stopbits=args.stopbits,
         faults=parse_faults(args.faults),
-        address_encoding=args.address_encoding,
-        response_encoding=args.response_encoding,
-        fault_encoding=args.fault_encoding,
+        **simulated_keys(args),  # the protocols' options the simulated drives take
         adapter_latency_ms=args.adapter_latency_ms,
         duplicate_addresses=args.duplicate_addresses,
     )

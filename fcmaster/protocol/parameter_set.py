@@ -3,7 +3,8 @@
 Vendor-neutral. Which parameters make up a set, which say who the drive is, which may change
 while the motor turns and which decide how the drive hears the master come from each vendor's
 ``parameters`` module (``SET_MEMBERS``, ``IDENTITY``, ``IDENTITY_MATCH``,
-``CHANGEABLE_WHILE_RUNNING``, ``LINK_SETTINGS``); this module only combines them.
+``CHANGEABLE_WHILE_RUNNING``, ``LINK_SETTINGS``), which its protocol spec hands on
+(``ProtocolSpec.parameters``); this module only combines them.
 
 A set travels as a plain mapping (YAML on disk, JSON over HTTP)::
 
@@ -28,6 +29,7 @@ from typing import Any, Final
 
 from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import DriveError, ParameterValue
+from fcmaster.protocol.registry import PROTOCOLS
 
 FORMAT: Final = "fcmaster-parameter-set/1"
 
@@ -46,21 +48,17 @@ class SetProfile:
 
 def profile_for(protocol: str) -> SetProfile:
     """The set profile of ``protocol``; UsageError for one this project does not know."""
-    if protocol == "danfoss-fc":
-        from fcmaster.protocol.danfoss_fc import parameters as vendor
-    elif protocol == "mitsubishi":
-        from fcmaster.protocol.mitsubishi import parameters as vendor  # type: ignore[no-redef]
-    elif protocol == "enc":
-        from fcmaster.protocol.enc import parameters as vendor  # type: ignore[no-redef]
-    else:
+    spec = PROTOCOLS.get(protocol)
+    if spec is None:
         raise UsageError(f"no parameter sets for protocol {protocol!r}")
+    tables = spec.parameters
     return SetProfile(
         protocol=protocol,
-        members=vendor.SET_MEMBERS,
-        identity=vendor.IDENTITY,
-        identity_match=vendor.IDENTITY_MATCH,
-        changeable_while_running=vendor.CHANGEABLE_WHILE_RUNNING,
-        link_settings=vendor.LINK_SETTINGS,
+        members=tables.set_members,
+        identity=tables.identity,
+        identity_match=tables.identity_match,
+        changeable_while_running=tables.changeable_while_running,
+        link_settings=tables.link_settings,
     )
 
 

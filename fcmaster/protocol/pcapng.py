@@ -7,7 +7,8 @@ little-endian with microsecond timestamps (the format's default resolution, so n
 skips blocks and options it does not know.
 
 There is no registered link-layer type for these drive protocols, so each gets one of the
-types reserved for private use (LINKTYPE_USER0-15, 147-162), always the same one:
+types reserved for private use (LINKTYPE_USER0-15, 147-162), always the same one (its
+spec's ``link_type``):
 
 =================  ===========  ===
 protocol           link type    DLT
@@ -31,8 +32,9 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from fcmaster.errors import ProtocolError
+from fcmaster.protocol.registry import PROTOCOLS as REGISTRY
 
-LINK_TYPES: Final[dict[str, int]] = {"danfoss-fc": 147, "mitsubishi": 148, "enc": 149}
+LINK_TYPES: Final[dict[str, int]] = {name: spec.link_type for name, spec in REGISTRY.items()}
 PROTOCOLS: Final[dict[int, str]] = {code: name for name, code in LINK_TYPES.items()}
 
 SHB: Final = 0x0A0D0D0A

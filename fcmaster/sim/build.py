@@ -1,77 +1,52 @@
-"""Building a simulated line from settings: the one place that knows every vendor's parts.
+"""Building a simulated line from settings; the line itself stays vendor-neutral.
 
-A vendor adds its simulator by adding a :class:`SimProtocol` to :data:`SIM_PROTOCOLS`: the
-framer that cuts its requests out of the byte stream and a factory for its drives. The
-line itself stays vendor-neutral.
+A protocol's simulated drives are described by a :class:`SimProtocol` in its own sim
+package (``fcmaster/sim/<vendor>/simulator.py``), named by the protocol's spec
+(``ProtocolSpec.simulator``, a ``"module:attribute"`` string, because the protocol layer
+may not import the simulator). :data:`SIM_PROTOCOLS` resolves every registered protocol's
+once, here; the addresses a simulated drive may have are the spec's for the line's options.
 """
 
 from __future__ import annotations
 
+import importlib
 import random
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
 from functools import partial
-from typing import Final
+from typing import Any, Final
 
-from fcmaster.bus.plan import LinePlan
 from fcmaster.clock import Clock
 from fcmaster.errors import UsageError
-from fcmaster.protocol.danfoss_fc.framer import FcFramer
+from fcmaster.protocol.registry import PROTOCOLS
 from fcmaster.sim.adapter import LatencyAdapter
-from fcmaster.sim.danfoss_fc.drive import FcSimDrive
-from fcmaster.sim.enc.drive import EncRequestFramer, EncSimDrive
-from fcmaster.sim.line import RequestFramer, SimDrive, SimLine
-from fcmaster.sim.mitsubishi import MitsubishiSimDrive, line_parameters, line_receiver
+from fcmaster.sim.line import SimLine
 from fcmaster.sim.settings import DriveSettings, LineSettings
+from fcmaster.sim.simulator import DriveFactory, SimProtocol
 
-# address, settings, the line's settings, power-up time → a drive
-DriveFactory = Callable[[int, DriveSettings, LineSettings, float], SimDrive]
-
-
-@dataclass(slots=True, frozen=True)
-class SimProtocol:
-    """What the simulator needs of one protocol."""
-
-    # The framer that cuts requests out of the bytes, for a line of drives with these
-    # settings (they matter where the request format is a drive setting: Mitsubishi's
-    # Pr.123 and Pr.124).
-    framer_for: Callable[[list[DriveSettings]], RequestFramer]
-    new_drive: DriveFactory
-    addresses: range  # addresses a drive may have
-    # Drive settings a bus's config implies (Mitsubishi: Pr.124 from its terminator).
-    line_parameters: Callable[[LinePlan], dict[str, float]] | None = None
-    # The drives time each reply themselves (Mitsubishi: the request's waiting time), so
-    # the bus's response delay is not theirs.
-    own_timing: bool = False
+__all__ = ["SIM_PROTOCOLS", "DriveFactory", "SimProtocol", "build_line", "simulated_keys"]
 
 
-def _fc_drive(address: int, settings: DriveSettings, line: LineSettings, now: float) -> SimDrive:
-    return FcSimDrive(address, settings, now=now, line=line)
+def _resolve(reference: str) -> SimProtocol:
+    module, _, attribute = reference.partition(":")
+    simulator = getattr(importlib.import_module(module), attribute)
+    if not isinstance(simulator, SimProtocol):  # pragma: no cover - a spec naming the wrong thing
+        raise TypeError(f"{reference} is not a SimProtocol")
+    return simulator
 
 
-def _mitsubishi_drive(
-    address: int, settings: DriveSettings, line: LineSettings, now: float
-) -> SimDrive:
-    return MitsubishiSimDrive(address, settings, now=now, line=line)
-
-
-def _enc_drive(address: int, settings: DriveSettings, line: LineSettings, now: float) -> SimDrive:
-    return EncSimDrive(address, settings, now=now, line=line)
-
-
-SIM_PROTOCOLS: Final[dict[str, SimProtocol]] = {
-    "danfoss-fc": SimProtocol(lambda _: FcFramer(), _fc_drive, range(1, 127)),
-    # 0 and 127 (broadcast) cannot name one drive; F2.15 allows them, the master does not
-    "enc": SimProtocol(lambda _: EncRequestFramer(), _enc_drive, range(1, 127)),
-    # stations 0-31; the link has no broadcast, so 0 is a drive like the others
-    "mitsubishi": SimProtocol(
-        line_receiver,
-        _mitsubishi_drive,
-        range(0, 32),
-        line_parameters=line_parameters,
-        own_timing=True,
-    ),
+SIM_PROTOCOLS: Final[Mapping[str, SimProtocol]] = {
+    name: _resolve(spec.simulator) for name, spec in PROTOCOLS.items()
 }
+
+
+def simulated_keys(source: object) -> dict[str, Any]:
+    """The line keys the simulated drives take (``LineKey.simulated``), as ``source`` has them."""
+    return {
+        key.name: getattr(source, key.name)
+        for spec in PROTOCOLS.values()
+        for key in spec.line_keys
+        if key.simulated and hasattr(source, key.name)
+    }
 
 
 def build_line(
@@ -93,9 +68,10 @@ def build_line(
         raise UsageError(f"no simulated drives for protocol {line.protocol!r} yet (have: {known})")
     drives = list(drives)
     addresses = [address for address, _ in drives]
-    bad = [a for a in addresses if a not in protocol.addresses]
+    allowed = PROTOCOLS[line.protocol].addresses(line)
+    bad = [a for a in addresses if a not in allowed]
     if bad:
-        raise UsageError(f"{line.protocol} addresses are {_span(protocol.addresses)}, not {bad}")
+        raise UsageError(f"{line.protocol} addresses are {_span(allowed)}, not {bad}")
     repeated = sorted({a for a in addresses if addresses.count(a) > 1})
     if repeated and not line.duplicate_addresses:
         raise UsageError(f"addresses {repeated} appear more than once on line {line.name}")

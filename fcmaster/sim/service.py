@@ -33,7 +33,7 @@ from typing import Any, Final
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.clock import Clock
 from fcmaster.errors import ConfigError, FcmasterError
-from fcmaster.sim.build import SIM_PROTOCOLS, build_line
+from fcmaster.sim.build import SIM_PROTOCOLS, build_line, simulated_keys
 from fcmaster.sim.faults import FaultPlan, parse_faults
 from fcmaster.sim.line import SimLine
 from fcmaster.sim.motor import MotorRating
@@ -96,8 +96,7 @@ def sim_settings(
     line = LineSettings(
         name=plan.name, protocol=plan.protocol, baudrate=plan.baudrate, parity=plan.parity,
         stopbits=plan.stopbits, databits=plan.databits, faults=faults,
-        address_encoding=plan.address_encoding, response_encoding=plan.response_encoding,
-        fault_encoding=plan.fault_encoding,
+        **simulated_keys(plan),
     )  # fmt: skip
     if "adapter_latency_ms" in simulation:
         try:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from fcmaster.errors import UsageError
+from fcmaster.protocol.registry import DEFAULT
 from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.motor import Motor, MotorRating
 
@@ -65,13 +66,13 @@ class LineSettings:
     """A simulated line: protocol, character format and line-wide faults."""
 
     name: str = "line1"
-    protocol: str = "danfoss-fc"
+    protocol: str = DEFAULT  # a registered protocol's name (fcmaster.protocol.registry)
     baudrate: int = 19200
     parity: str = "E"  # N | E | O
     stopbits: int = 1
     databits: int = 8
     faults: FaultPlan = field(default_factory=FaultPlan)
-    # enc: how the drives write addresses ≥ 10, response codes and fault codes (hex | decimal)
+    # the line keys the simulated drives take (LineKey.simulated): hex | decimal
     address_encoding: str = "hex"
     response_encoding: str = "hex"
     fault_encoding: str = "hex"

@@ -1,0 +1,161 @@
+"""The config's adapter sections (HTTP, MQTT, Modbus TCP, metrics, logging) as pydantic models.
+
+Each model checks what it can alone (``extra="forbid"``, types, ranges, a URL's form); rules
+that need the whole file (tokens that MQTT commands need, Modbus unit ids across buses) are
+:mod:`fcmaster.config`'s.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from typing import Annotated, Literal
+from urllib.parse import urlsplit
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
+
+
+class StrictModel(BaseModel):
+    """A config section: unknown keys are errors, and the result cannot change."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class TokenModel(StrictModel):
+    """A bearer token and the role it grants."""
+
+    name: str = Field(min_length=1)
+    role: Literal["viewer", "operator"]
+    token: str = Field(min_length=16)
+
+
+class HttpModel(StrictModel):
+    """The HTTP API, dashboard and metrics listener."""
+
+    listen: str = "127.0.0.1:8080"
+    tokens: list[TokenModel] = Field(default_factory=list)
+    anonymous: Literal["none", "viewer"] = "none"
+    cors_origins: list[str] = Field(default_factory=list)
+
+
+class TlsModel(StrictModel):
+    """TLS for the MQTT connection."""
+
+    ca: str | None = None
+    cert: str | None = None
+    key: str | None = None
+    insecure: bool = False
+
+
+class MqttModel(StrictModel):
+    """The MQTT bridge."""
+
+    url: str = "mqtt://127.0.0.1:1883"  # mqtt://host[:1883] or mqtts://host[:8883]
+    base_topic: str = "fcmaster"
+    status_topic: str | None = None  # None: {base_topic}/status; one per gateway on a shared base
+    client_id: str | None = None
+    username: str | None = None
+    password: str | None = None
+    tls: TlsModel | None = None
+    heartbeat_s: float = Field(default=60.0, gt=0)
+    deadband_pct: float = Field(default=0.5, ge=0)
+    discovery: bool = False
+    discovery_prefix: str = "homeassistant"
+    keepalive_s: int = Field(default=30, ge=5, le=3600)
+    reconnect_min_s: float = Field(default=1.0, gt=0)
+    reconnect_max_s: float = Field(default=60.0, gt=0)
+    # Commands over MQTT: off unless switched on; then each payload carries an operator
+    # token of http.tokens ("token"), unless the broker's ACLs alone decide who may publish.
+    commands: bool = False
+    trust_broker: bool = False
+
+    @field_validator("url")
+    @classmethod
+    def _check_url(cls, url: str) -> str:
+        parts = urlsplit(url)
+        if parts.scheme not in ("mqtt", "mqtts"):
+            raise ValueError("use mqtt://host:port or mqtts://host:port")
+        if not parts.hostname:
+            raise ValueError("the URL names no host")
+        if parts.username is not None or parts.password is not None:
+            raise ValueError("put credentials in mqtt.username and mqtt.password")
+        _ = parts.port  # raises ValueError for a port that is not a number in range
+        return url
+
+    @model_validator(mode="after")
+    def _check_tls(self) -> MqttModel:
+        if self.tls is not None and urlsplit(self.url).scheme != "mqtts":
+            raise ValueError("a tls section needs an mqtts:// url (mqtt:// is plain TCP)")
+        if self.tls is not None and self.tls.key is not None and self.tls.cert is None:
+            raise ValueError("tls.key belongs to a client certificate: give tls.cert too")
+        if self.reconnect_min_s > self.reconnect_max_s:
+            raise ValueError("reconnect_min_s is above reconnect_max_s")
+        return self
+
+    @field_validator("base_topic", "status_topic", "discovery_prefix")
+    @classmethod
+    def _check_topic(cls, topic: str | None) -> str | None:
+        if topic is not None and (
+            not topic.strip("/") or set(topic) & {"+", "#"} or topic != topic.strip("/")
+        ):
+            raise ValueError("a topic without wildcards (+, #) or a leading or trailing /")
+        return topic
+
+
+def _cidr(text: str) -> str:
+    try:
+        ipaddress.ip_network(text, strict=False)
+    except ValueError:
+        raise ValueError(f"{text!r} is not an address or network like 10.0.0.0/8") from None
+    return text
+
+
+class ModbusModel(StrictModel):
+    """The Modbus TCP server for PLCs and SCADA (read-only unless ``commands: true``)."""
+
+    listen: str = "127.0.0.1:5020"
+    # Who may connect (addresses or CIDR networks); None: this machine only. Modbus has no
+    # authentication, so listening beyond loopback needs this list.
+    allow: list[Annotated[str, AfterValidator(_cidr)]] | None = None
+    commands: bool = False
+
+    @field_validator("listen")
+    @classmethod
+    def _check_listen(cls, listen: str) -> str:
+        host, port = modbus_listen(listen)
+        if not host or port is None or not 0 <= port <= 65535:
+            raise ValueError("write it like 127.0.0.1:5020 or [::1]:5020")
+        return listen
+
+
+def modbus_listen(text: str) -> tuple[str, int | None]:
+    """``"127.0.0.1:5020"`` or ``"[::1]:5020"`` → host and port (None if not a number)."""
+    text = text.strip()
+    if text.startswith("["):
+        host, _, rest = text[1:].partition("]")
+        port = rest[1:] if rest.startswith(":") else ""
+    else:
+        host, _, port = text.rpartition(":") if text.count(":") == 1 else (text, "", "")
+    return host, int(port) if port.isdigit() else None
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (a name or an address) is this machine only."""
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+class MetricsModel(StrictModel):
+    """Prometheus metrics at /metrics on the HTTP listener."""
+
+    enabled: bool = True
+
+
+class LoggingModel(StrictModel):
+    """Log level and format (auto: console on a terminal, JSON otherwise)."""
+
+    level: Literal["debug", "info", "warning", "error"] = "info"
+    format: Literal["auto", "json", "console"] = "auto"

@@ -1,0 +1,185 @@
+"""What the rest of the house may know about one protocol: its :class:`ProtocolSpec`.
+
+Every vendor package under ``fcmaster/protocol/`` has a ``spec.py`` holding one
+``ProtocolSpec``, and :mod:`fcmaster.protocol.registry` lists them, one line each. Config,
+CLI, commissioning, decode, the doctor, confirmation deadlines, the simulator and the bus
+read what they need from the spec of a line's ``protocol``; none of them branches on a
+vendor's name. Adding a protocol is one new package plus one registry line.
+
+The spec is plain data and pure functions, so it lives in the sans-I/O layer. Two things
+belong to higher layers and are named here, never imported:
+
+- the simulator: ``simulator`` is ``"module:attribute"`` of the sim layer's description of
+  the vendor's simulated drives (a ``fcmaster.sim.simulator.SimProtocol``), resolved by
+  ``fcmaster.sim.build`` when it builds a line. The protocol layer may not import the
+  simulator (the import contract puts ``sim`` above it), and a dotted name keeps it so
+  while the vendor still adds its simulator in its own package.
+- the config models and CLI options: a protocol's own line settings are described once as
+  :class:`LineKey` values (name, allowed values, default, help); ``fcmaster.config`` turns
+  them into validated keys and ``fcmaster.cli_arguments`` into options, so the YAML key, the
+  CLI option and the codec's argument cannot drift apart.
+
+A protocol's *options* are the values of its line keys for one line, as a frozen
+dataclass of its own (FC: the address format). :meth:`ProtocolSpec.options_of` reads them
+from anything that carries the keys as attributes (a ``LinePlan``, a commissioning command's
+options, the simulator's line settings) or as ``protocol_options`` pairs (a ``LinePlan``
+keeps there the keys it has no field for, so a new protocol needs no new plan field); what
+a source lacks takes its default.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+from fcmaster.protocol.codec import DriveCodec, ParameterKey
+
+OptionsT = TypeVar("OptionsT")
+
+# The value a line key may take: a choice (31, "crlf") or a number; None where null is allowed.
+KeyValue = int | str | None
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class LineKey:
+    """A line setting only this protocol has: one config key and one CLI option.
+
+    The config key is ``name`` (``address_format``), the CLI option ``--`` with dashes
+    (``--address-format``), and the options dataclass has a field of the same name.
+    """
+
+    name: str
+    default: KeyValue
+    help: str
+    # The values it may take; empty: a whole number from ``minimum`` to ``maximum`` in
+    # steps of ``step`` (Mitsubishi's waiting time).
+    choices: tuple[int, ...] | tuple[str, ...] = ()
+    minimum: int = 0
+    maximum: int = 0
+    step: int = 1
+    nullable: bool = False  # null in the config, ``none`` on the command line
+    metavar: str | None = None  # the CLI's name for a number's value ("MS|none")
+    # The simulated drives take it from the line too (`fcmaster sim --KEY`).
+    simulated: bool = False
+
+
+@dataclass(slots=True, frozen=True)
+class SerialSettings:
+    """A drive's factory serial settings."""
+
+    baudrate: int
+    parity: str  # N | E | O
+    stopbits: int
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class DiagnosisParameters:
+    """The drive parameters the doctor names when it says what to set, and a drive's delay."""
+
+    address: str
+    baudrate: str
+    parity: str
+    delay: str  # the drive's response delay setting
+    factory_delay_s: float  # that delay as the drives leave the factory
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class ParameterTables:
+    """The facts of a vendor's parameter tables that vendor-neutral code combines.
+
+    What makes up a backup of a drive's settings, and the unit of a parameter's values.
+    Parameters are written as the codec writes them (``"3-41"``, ``"Pr.7"``, ``"F0.08"``).
+    """
+
+    set_members: tuple[tuple[str, str], ...]  # (parameter, name) in the order to read/write
+    identity: tuple[tuple[str, str], ...]  # (parameter, name): who the drive is
+    identity_match: frozenset[str]  # identity entries a restore insists on (type, model)
+    changeable_while_running: frozenset[str]  # known from the manuals; all others: stopped
+    link_settings: frozenset[str]  # address, baud, parity, protocol: never restored
+    unit_of: Callable[[ParameterKey], str]  # the unit its values come in, as read
+
+
+# A frame → its fields, JSON-ready; ``from_drive``: a reply rather than a request.
+Describe = Callable[..., dict[str, Any]]
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class ProtocolSpec(Generic[OptionsT]):
+    """Everything outside a vendor's package needs to know about its protocol."""
+
+    name: str  # the config and CLI id: "danfoss-fc"
+    manufacturer: str  # as a device registry shows it (Home Assistant discovery)
+    # The options dataclass: one field per line key, each with the key's default.
+    options: Callable[..., OptionsT]
+    line_keys: tuple[LineKey, ...] = ()
+    # A codec for a line with these options; per address, what 100 % reference means in Hz.
+    new_codec: Callable[[OptionsT, Mapping[int, float]], DriveCodec]
+    factory: SerialSettings
+    baudrates: tuple[int, ...]  # the rates the drives offer, fastest first
+    parities: tuple[str, ...]  # the parities the drives offer, the factory one first
+    # The response delay the protocol fixes for these options (Mitsubishi: the waiting
+    # time plus the data check), or None where it is each drive's own setting (FC 8-35).
+    fixed_response_delay_s: Callable[[OptionsT], float | None] = lambda _: None
+    # Why an address outside the range cannot be used, beyond "outside 1-126" ("": no more
+    # to say): ENC's broadcast addresses, its decimal addresses' two digits.
+    address_hint: Callable[[OptionsT, int], str] = lambda _options, _address: ""
+    status_bits: type[enum.IntFlag]  # the status word, bit by bit, as the manual names them
+    parameters: ParameterTables
+    describe: Describe  # `fcmaster decode`
+    checksum_key: str  # the key of ``describe``'s result that says whether the check held
+    # Frames written the manuals' way (``<ENQ>01…<CR>``) → bytes; None: hex only.
+    parse_text: Callable[[str], bytes] | None = None
+    # Acceleration and deceleration times a poll can read (confirmation deadlines of stops);
+    # None where reading them needs more than a poll.
+    ramp_parameters: tuple[str, str] | None = None
+    diagnosis: DiagnosisParameters
+    simulator: str  # "module:attribute" of its SimProtocol in the sim layer (see above)
+    link_type: int  # its pcapng link type in captures (a private USER type, 147-162)
+    # The drive's communication watchdog facts (timeout and action parameters); None until
+    # the vendor's package provides them.
+    watchdog: object | None = None
+
+    def options_of(self, source: object = None) -> OptionsT:
+        """This protocol's options as ``source`` has them.
+
+        A key is read from ``source``'s attribute of the same name, else from its
+        ``protocol_options`` pairs (where a ``LinePlan`` keeps the keys of protocols it has
+        no field for); a key that ``source`` lacks (or every key, with no source) takes its
+        default.
+        """
+        extra = dict(getattr(source, "protocol_options", ()))
+        given = {
+            k.name: getattr(source, k.name) if hasattr(source, k.name) else extra[k.name]
+            for k in self.line_keys
+            if hasattr(source, k.name) or k.name in extra
+        }
+        return self.options(**given)
+
+    def codec(
+        self, source: object = None, nominal_hz: Mapping[int, float] | None = None
+    ) -> DriveCodec:
+        """A codec for a line whose options ``source`` carries (see :meth:`options_of`)."""
+        return self.new_codec(self.options_of(source), nominal_hz or {})
+
+    def addresses(self, source: object = None) -> range:
+        """The addresses a drive may have on a line with ``source``'s options."""
+        return self.codec(source).addresses
+
+    def response_delay_s(self, source: object = None) -> float | None:
+        """The response delay the protocol fixes for ``source``'s options (None: none)."""
+        return self.fixed_response_delay_s(self.options_of(source))
+
+    def bad_address(self, source: object, address: int) -> str:
+        """Why ``address`` cannot name a drive on this line ("" when it can)."""
+        addresses = self.addresses(source)
+        if address in addresses:
+            return ""
+        reason = f"{address} is outside {addresses.start}-{addresses.stop - 1}"
+        hint = self.address_hint(self.options_of(source), address)
+        return f"{reason}: {hint}" if hint else reason
+
+    def owns_key(self, name: str) -> bool:
+        """Whether ``name`` is one of this protocol's own line keys."""
+        return any(k.name == name for k in self.line_keys)
