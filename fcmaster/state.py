@@ -313,10 +313,6 @@ class FleetState:
                 changes["direction"] = "reverse" if commanded.reverse else "forward"
         if reply.output_frequency_hz is not None:
             changes["output_frequency_hz"] = abs(reply.output_frequency_hz)
-        elif reply.output_pct is not None:
-            changes["output_frequency_hz"] = round(
-                abs(reply.output_pct) * drive.nominal_frequency_hz / 100.0, 3
-            )
         value, report, read, measured = reply.value, reply.conditions, None, None
         monitored = self._monitored[key]
         if value is not None and (monitored is None or value.parameter.name in monitored):

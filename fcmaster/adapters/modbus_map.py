@@ -33,6 +33,7 @@ from fcmaster.config import Config, modbus_units
 from fcmaster.errors import ConfigError
 from fcmaster.protocol import danfoss_fc, enc, mitsubishi
 from fcmaster.protocol.codec import ParameterKey
+from fcmaster.protocol.drive import pct_to_hz
 from fcmaster.state import DriveState
 
 ACTIONS: Final = {  # the `command` register's action codes (DESIGN.md "Modbus TCP")
@@ -227,7 +228,7 @@ def _holdings(drive: DrivePlan) -> tuple[Register, ...]:
     nominal = drive.nominal_frequency_hz
 
     def reference_hz(state: DriveState) -> float | None:
-        return None if state.reference_pct is None else state.reference_pct * nominal / 100.0
+        return None if state.reference_pct is None else pct_to_hz(state.reference_pct, nominal)
 
     return (
         _u16("holding", COMMAND_ADDRESS, "command", lambda _state, _now: 0.0),

@@ -18,7 +18,11 @@ PROTOCOLS = ("danfoss-fc", "mitsubishi", "enc")
 def codec_for(plan: LinePlan) -> DriveCodec:
     """A codec set up for ``plan``'s protocol and its protocol options."""
     if plan.protocol == "danfoss-fc":
-        return FcCodec(AddressFormat(plan.address_format))
+        return FcCodec(
+            AddressFormat(plan.address_format),
+            # The main actual value is in % of the drive's nominal; replies carry Hz.
+            nominal_hz={drive.address: drive.nominal_frequency_hz for drive in plan.drives},
+        )
     if plan.protocol == "mitsubishi":
         return MitsubishiCodec(
             terminator=plan.terminator,

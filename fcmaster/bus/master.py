@@ -51,7 +51,7 @@ from fcmaster.errors import (
     PortError,
 )
 from fcmaster.protocol.codec import DriveCodec, Reply
-from fcmaster.protocol.drive import ControlIntent
+from fcmaster.protocol.drive import ControlIntent, hz_to_pct, pct_to_hz
 
 log = structlog.get_logger("fcmaster.bus")
 
@@ -450,7 +450,7 @@ class BusMaster:
             slot = self.planner.find(drive)
             if slot is not None:
                 nominal = slot.plan.nominal_frequency_hz
-                values["frequency_hz"] = round(command.reference_pct * nominal / 100, 6)
+                values["frequency_hz"] = round(pct_to_hz(command.reference_pct, nominal), 6)
         if command.parameter is not None:
             values["parameter"] = command.parameter
             if command.index:
@@ -529,7 +529,7 @@ class Drive:
     ) -> float | None:
         """A reference in % of nominal frequency from whichever of the two is given."""
         if frequency_hz is not None:
-            return frequency_hz / self.plan.nominal_frequency_hz * 100.0
+            return hz_to_pct(frequency_hz, self.plan.nominal_frequency_hz)
         return reference_pct
 
     async def start(
