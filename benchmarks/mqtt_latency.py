@@ -44,7 +44,7 @@ from fcmaster.adapters.mqtt import MqttAdapter
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.transport import Transport
-from fcmaster.clock import new_event_loop
+from fcmaster.clock import Clock, new_event_loop
 from fcmaster.config import MqttModel, parse
 from fcmaster.hub import Hub
 from fcmaster.protocol.danfoss_fc import decode_telegram
@@ -90,6 +90,10 @@ class TapGateway:
     def __init__(self, service: Service) -> None:
         self.service = service
         self.calls: list[float] = []
+
+    @property
+    def clock(self) -> Clock:
+        return self.service.clock
 
     @property
     def hub(self) -> Hub:

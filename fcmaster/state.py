@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import dataclasses
 import operator
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -211,13 +210,12 @@ class FleetState:
         *,
         emit: Callable[[Event], None],
         clock: Clock,
-        wall: Callable[[], float] = time.time,
         heartbeat_s: float = HEARTBEAT_S,
         deadband_pct: float = DEADBAND_PCT,
     ) -> None:
         self._publish_event = emit
         self._clock = clock
-        self._wall = wall
+        self._wall = clock.wall  # looked up once: every reply is stamped with it
         self._heartbeat_s = heartbeat_s
         self._band = deadband_pct / 100.0
         self.history = History()  # what was published, for charts opened later

@@ -219,7 +219,7 @@ def create_app(
     )
     app.router.route_class = _StrictJsonRoute
     registry = streams if streams is not None else StreamRegistry()
-    viewer_reads = ViewerReads()
+    viewer_reads = ViewerReads(gateway.clock)
     app.state.auth = auth
 
     async def run(

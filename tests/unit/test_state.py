@@ -26,10 +26,8 @@ WALL_AT_START = 1_790_000_000.0
 
 def _fleet() -> tuple[FleetState, list[Event], FakeClock]:
     events: list[Event] = []
-    clock = FakeClock(start=500.0)
-    fleet = FleetState(
-        (LINE,), emit=events.append, clock=clock, wall=lambda: WALL_AT_START + clock.now() - 500.0
-    )
+    clock = FakeClock(start=500.0, epoch=WALL_AT_START - 500.0)
+    fleet = FleetState((LINE,), emit=events.append, clock=clock)
     return fleet, events, clock
 
 
