@@ -199,8 +199,7 @@ async def measure(count: int, drives: int, baudrate: int, *, nodelay: bool) -> N
             async with adapter, aiomqtt.Client("127.0.0.1", port, socket_options=NODELAY) as client:
                 await adapter.connected.wait()
                 await client.subscribe("fcmaster/line1/d1/command/result", qos=1)
-                while not all(s.online for s in service.fleet.snapshot()):  # noqa: ASYNC110
-                    await asyncio.sleep(0.05)
+                await service.hub.wait_for(lambda: all(s.online for s in service.fleet.snapshot()))
                 tap = taps[0]
                 rows: dict[str, list[list[float]]] = {"read": [], "control": []}
                 messages = client.messages

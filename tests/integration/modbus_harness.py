@@ -22,7 +22,6 @@ from fcmaster.sim.line import SimLine
 from fcmaster.sim.service import sim_line
 from fcmaster.sim.transport import SimTransport
 from tests.integration.ports import free_port
-from tests.integration.waiting import wait_for
 
 CONFIG = """
 buses:
@@ -88,6 +87,12 @@ class Plant:
                 return drive
         raise KeyError(address)
 
+    def online(self, bus: str, name: str) -> bool:
+        """Whether the fleet shows drive ``name`` online."""
+        state = self.service.fleet.get(bus, name)
+        assert state is not None
+        return state.online
+
     def control_sent(self, bus: str, address: int, since: int = 0) -> set[tuple[int, int]]:
         """The (control word, reference) pairs sent to ``address`` in frames ``since`` on."""
         sent = set()
@@ -127,9 +132,17 @@ async def plant(
     service = Service(parsed, clock=clock, transport_factory=transport)
     task = asyncio.create_task(service.run(install_signals=False), name="test.service")
     try:
-        await wait_for(lambda: all(s.online for s in service.fleet.snapshot()) or task.done())
-        if task.done():
+        online = asyncio.create_task(
+            service.hub.wait_for(
+                lambda: all(s.online for s in service.fleet.snapshot()), timeout_s=10
+            )
+        )
+        await asyncio.wait((online, task), return_when=asyncio.FIRST_COMPLETED)
+        if task.done():  # the service ended (failed) before its drives came online
+            online.cancel()
             task.result()
+        else:
+            online.result()
         yield Plant(service, port, lines, wires)
     finally:
         service.stop()

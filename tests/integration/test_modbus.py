@@ -41,7 +41,7 @@ def values_read(plant: Plant) -> bool:
 
 async def test_input_registers_show_the_simulated_drives() -> None:
     async with asyncio.timeout(LIMIT_S), plant() as running, Client(HOST, running.port) as client:
-        await wait_for(lambda: values_read(running))
+        await running.service.hub.wait_for(lambda: values_read(running), timeout_s=10)
         words = await client.read_input(1, 0, 32)
         drive = running.drive("line1", 1)
         assert words[0] == 1  # online
@@ -183,7 +183,9 @@ async def test_an_offline_drive_reads_online_0_its_age_and_unknown_values() -> N
         assert fresh[2] != 0xFFFF
         assert not is_nan(fresh[16:18])
         state = running.service.fleet.get("line2", "pump-3")
-        await wait_for(lambda: not running.service.fleet.get("line2", "pump-3").online, 15)  # type: ignore[union-attr]
+        await running.service.hub.wait_for(
+            lambda: not running.online("line2", "pump-3"), timeout_s=15
+        )
         words = await client.read_input(11, 0, 20)
         assert words[0] == 0
         assert 0 < words[1] < 600  # tenths of a second since the last good reply
@@ -202,7 +204,9 @@ async def test_a_silent_drive_answers_0x0b_and_a_line_that_is_down_0x0a() -> Non
         plant(line2=silent) as running,
         Client(HOST, running.port) as client,
     ):
-        await wait_for(lambda: not running.service.fleet.get("line2", "pump-3").online, 15)  # type: ignore[union-attr]
+        await running.service.hub.wait_for(
+            lambda: not running.online("line2", "pump-3"), timeout_s=15
+        )
         with pytest.raises(ModbusError) as no_answer:
             await client.write_single(11, 0, 2)  # stop: tried, retried, no answer
         assert no_answer.value.code == 0x0B
