@@ -92,7 +92,7 @@ class FakeGateway:
     def line_frames(self, name: str, since: int) -> tuple[LinePlan, FramesSince] | None:
         for line in self.plans:
             if line.name == name:
-                return line, self.frames.setdefault(name, FrameLog()).since(since)
+                return line, self.frames.setdefault(name, FrameLog(self.clock.wall)).since(since)
         return None
 
     async def execute(self, drive: str, command: Command) -> CommandResult:
