@@ -183,7 +183,7 @@ class Hub:
         if self._waiters:
             waiters, self._waiters = self._waiters, []
             for waiter in waiters:
-                if not waiter.done():  # a waiter that timed out is left behind cancelled
+                if not waiter.done():
                     waiter.set_result(None)
 
     async def wait_for(
@@ -192,7 +192,7 @@ class Hub:
         """Wait until ``condition()`` is true, checked now and after each publication.
 
         Returns what ``condition`` returned (so it can hand back the state it found);
-        TimeoutError after ``timeout_s`` (None: no limit).
+        TimeoutError after ``timeout_s`` of the event loop's time (None: no limit).
         """
         async with asyncio.timeout(timeout_s):
             while True:
@@ -201,7 +201,17 @@ class Hub:
                     return found
                 waiter = asyncio.get_running_loop().create_future()
                 self._waiters.append(waiter)
-                await waiter
+                try:
+                    await waiter
+                except asyncio.CancelledError:  # timed out or cancelled: leave nothing behind
+                    if waiter in self._waiters:
+                        self._waiters.remove(waiter)
+                    raise
+
+    @property
+    def waiting(self) -> int:
+        """How many ``wait_for`` calls wait for the next publication."""
+        return len(self._waiters)
 
     @property
     def subscriptions(self) -> int:

@@ -175,6 +175,7 @@ async def test_wait_for_checks_again_after_each_publication_and_returns_what_it_
     waiting = asyncio.create_task(hub.wait_for(fast_enough))
     await _settle()
     assert seen == [None]  # checked once, then it waits: no polling
+    assert hub.waiting == 1
     await _settle()
     assert seen == [None]
     for hz in (10.0, 30.0):
@@ -191,7 +192,8 @@ async def test_a_wait_that_times_out_leaves_the_hub_working() -> None:
     sub = hub.subscribe()
     with pytest.raises(TimeoutError):
         await hub.wait_for(lambda: False, timeout_s=0)
-    hub.publish(_alarm("pump-1", 13))  # wakes nobody: the waiter was cancelled
+    assert hub.waiting == 0  # the timed-out waiter left nothing behind
+    hub.publish(_alarm("pump-1", 13))  # wakes nobody
     assert sub.get_nowait() == _alarm("pump-1", 13)
     assert await hub.wait_for(lambda: sub.pending == 0) is True
 
