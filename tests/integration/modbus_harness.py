@@ -109,16 +109,18 @@ class Plant:
 
 @asynccontextmanager
 async def plant(
-    modbus: str = "{listen: 127.0.0.1:PORT, commands: true}", line2: str = "{}"
+    modbus: str = "{listen: 127.0.0.1:PORT, commands: true}",
+    line2: str = "{}",
+    clock: MonotonicClock | None = None,
 ) -> AsyncIterator[Plant]:
     """Run the daemon of :data:`CONFIG` with ``modbus`` as its section (PORT: a free one).
 
-    ``line2`` is the second line's ``simulation`` section.
+    ``line2`` is the second line's ``simulation`` section; ``clock`` the daemon's.
     """
     port = free_port()
     text = CONFIG.replace("MODBUS", modbus.replace("PORT", str(port)))
     parsed = config.parse(text.replace("SIMULATION", line2))
-    clock = MonotonicClock()
+    clock = clock or MonotonicClock()
     lines: dict[str, SimLine] = {}
     wires: dict[str, RecordingTransport] = {}
 
