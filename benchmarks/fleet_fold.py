@@ -34,7 +34,7 @@ MONITOR = [ParameterKey(f"16-{n:02d}", 1600 + n) for n in (13, 14, 12, 10, 30, 9
 def _reply(n: int, amount: float) -> Reply:
     key = MONITOR[n % len(MONITOR)]
     value = ParameterValue(parameter=key, index=0, raw=int(amount * 100), value=amount, unit="")
-    return Reply(address=1, status=STATUS, output_pct=84.0, value=value)
+    return Reply(address=1, status=STATUS, output_frequency_hz=42.0, value=value)
 
 
 def measure(replies: int, *, changing: bool) -> dict[str, float]:

@@ -13,12 +13,13 @@ import statistics
 import time
 
 from fcmaster.bus.frame_log import FRAME_LOG_LENGTH, TX, FrameLog
+from fcmaster.clock import MonotonicClock
 
 TRANSACTION_S = 32 * 11 / 115200  # request and reply, 16 bytes each, 8E1
 
 
 def one_run(iterations: int) -> float:
-    log = FrameLog()
+    log = FrameLog(MonotonicClock().wall)
     data = bytes(16)
     for _ in range(FRAME_LOG_LENGTH):  # a full ring: every add also drops the oldest
         log.add(TX, data, 0.0)

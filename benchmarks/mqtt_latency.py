@@ -44,7 +44,7 @@ from fcmaster.adapters.mqtt import MqttAdapter
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.transport import Transport
-from fcmaster.clock import new_event_loop
+from fcmaster.clock import Clock, new_event_loop
 from fcmaster.config import MqttModel, parse
 from fcmaster.hub import Hub
 from fcmaster.protocol.danfoss_fc import decode_telegram
@@ -90,6 +90,10 @@ class TapGateway:
     def __init__(self, service: Service) -> None:
         self.service = service
         self.calls: list[float] = []
+
+    @property
+    def clock(self) -> Clock:
+        return self.service.clock
 
     @property
     def hub(self) -> Hub:
@@ -195,8 +199,7 @@ async def measure(count: int, drives: int, baudrate: int, *, nodelay: bool) -> N
             async with adapter, aiomqtt.Client("127.0.0.1", port, socket_options=NODELAY) as client:
                 await adapter.connected.wait()
                 await client.subscribe("fcmaster/line1/d1/command/result", qos=1)
-                while not all(s.online for s in service.fleet.snapshot()):  # noqa: ASYNC110
-                    await asyncio.sleep(0.05)
+                await service.hub.wait_for(lambda: all(s.online for s in service.fleet.snapshot()))
                 tap = taps[0]
                 rows: dict[str, list[list[float]]] = {"read": [], "control": []}
                 messages = client.messages

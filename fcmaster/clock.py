@@ -1,8 +1,9 @@
 """Time, injected: the :class:`Clock` seam and the event loop that keeps sub-millisecond time.
 
 Everything that waits (the bus master's pauses and deadlines, the simulator's wire delays,
-reconnect backoff) takes a Clock, so tests run in virtual time and the same code runs on a
-real port.
+reconnect backoff) or stamps a time (the fleet state's ``updated_at``, MQTT events, register
+ages) takes a Clock, so tests run in virtual time and the same code runs on a real port. The
+service makes one and hands it to the lines, the fleet state and every adapter.
 
 Why a special event loop: at 115200 baud two characters last 0.19 ms, but asyncio's default
 loop on Linux waits in epoll, whose timeout is whole milliseconds, so every short sleep
@@ -32,6 +33,9 @@ class Clock(Protocol):
 
     def now(self) -> float:
         """Seconds on a monotonic clock."""
+
+    def wall(self) -> float:
+        """Seconds since the Unix epoch, for the times people read (RFC 3339); never to wait on."""
 
     async def sleep(self, seconds: float) -> None:
         """Wait ``seconds``."""
@@ -78,6 +82,10 @@ class MonotonicClock:
     def now(self) -> float:
         """Seconds on the monotonic clock."""
         return time.monotonic()
+
+    # The wall clock is ``time.time`` itself, not a method around it: the fleet state stamps
+    # every reply with it, and a call through a Python method would cost more than the read.
+    wall = staticmethod(time.time)
 
     async def sleep(self, seconds: float) -> None:
         """Wait ``seconds`` on the event loop."""

@@ -16,18 +16,26 @@ things, and its memory is bounded whatever the subscriber does:
 Delivery keeps arrival order: each pending item carries the sequence number it was filed
 under (a snapshot keeps the number of its first undelivered version), and the consumer takes
 whichever head is older.
+
+:meth:`Hub.wait_for` waits for a condition on the fleet (or anything the publications
+follow) without polling: the condition is checked at once, then again after each
+publication. Publishing only wakes the waiters (it runs none of their code), and costs one
+test when nobody waits. A change that is never published is seen at the drive's next
+publication: a value moving within its deadband, at the heartbeat at the latest.
 """
 
 from __future__ import annotations
 
 import asyncio
 from collections import deque
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 from fcmaster.state import DriveUpdated, Event
 
 DEFAULT_MAX_EVENTS = 1000
+T = TypeVar("T")
 
 
 @dataclass(slots=True, frozen=True)
@@ -145,6 +153,7 @@ class Hub:
 
     def __init__(self) -> None:
         self._subscriptions: list[Subscription] = []
+        self._waiters: list[asyncio.Future[None]] = []  # woken by the next publication
         self.published = 0
 
     def subscribe(
@@ -171,6 +180,38 @@ class Hub:
         for subscription in self._subscriptions:
             if subscription.matches(event):
                 subscription.offer(event)
+        if self._waiters:
+            waiters, self._waiters = self._waiters, []
+            for waiter in waiters:
+                if not waiter.done():
+                    waiter.set_result(None)
+
+    async def wait_for(
+        self, condition: Callable[[], T | None], *, timeout_s: float | None = None
+    ) -> T:
+        """Wait until ``condition()`` is true, checked now and after each publication.
+
+        Returns what ``condition`` returned (so it can hand back the state it found);
+        TimeoutError after ``timeout_s`` of the event loop's time (None: no limit).
+        """
+        async with asyncio.timeout(timeout_s):
+            while True:
+                found = condition()
+                if found:
+                    return found
+                waiter = asyncio.get_running_loop().create_future()
+                self._waiters.append(waiter)
+                try:
+                    await waiter
+                except asyncio.CancelledError:  # timed out or cancelled: leave nothing behind
+                    if waiter in self._waiters:
+                        self._waiters.remove(waiter)
+                    raise
+
+    @property
+    def waiting(self) -> int:
+        """How many ``wait_for`` calls wait for the next publication."""
+        return len(self._waiters)
 
     @property
     def subscriptions(self) -> int:

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import dataclasses
 import operator
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -211,13 +210,12 @@ class FleetState:
         *,
         emit: Callable[[Event], None],
         clock: Clock,
-        wall: Callable[[], float] = time.time,
         heartbeat_s: float = HEARTBEAT_S,
         deadband_pct: float = DEADBAND_PCT,
     ) -> None:
         self._publish_event = emit
         self._clock = clock
-        self._wall = wall
+        self._wall = clock.wall  # looked up once: every reply is stamped with it
         self._heartbeat_s = heartbeat_s
         self._band = deadband_pct / 100.0
         self.history = History()  # what was published, for charts opened later
@@ -311,10 +309,6 @@ class FleetState:
                 changes["direction"] = "reverse" if commanded.reverse else "forward"
         if reply.output_frequency_hz is not None:
             changes["output_frequency_hz"] = abs(reply.output_frequency_hz)
-        elif reply.output_pct is not None:
-            changes["output_frequency_hz"] = round(
-                abs(reply.output_pct) * drive.nominal_frequency_hz / 100.0, 3
-            )
         value, report, read, measured = reply.value, reply.conditions, None, None
         monitored = self._monitored[key]
         if value is not None and (monitored is None or value.parameter.name in monitored):

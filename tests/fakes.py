@@ -10,24 +10,40 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
-from fcmaster.clock import Clock
+from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.errors import PortError, ReplyTimeout
 
 T = TypeVar("T")
+EPOCH = 1_790_000_000.0  # the virtual clocks' wall clock at their time 0 (2026-09-21)
+
+
+class WallShiftedClock(MonotonicClock):
+    """The real clock, with a wall clock a test chooses: ``wall()`` is ``read_wall()``."""
+
+    def __init__(self, read_wall: Callable[[], float]) -> None:
+        super().__init__()
+        self._read_wall = read_wall
+
+    def wall(self) -> float:
+        return self._read_wall()
 
 
 class FakeClock:
     """Virtual time: a sleep moves time forward at once, then yields to other tasks.
 
     Good for one sleeping task. When several tasks sleep at once, use :class:`VirtualClock`,
-    which wakes them in deadline order.
+    which wakes them in deadline order. Its wall clock moves with it: ``epoch + time``.
     """
 
-    def __init__(self, start: float = 1000.0) -> None:
+    def __init__(self, start: float = 1000.0, *, epoch: float = EPOCH) -> None:
         self.time = start
+        self.epoch = epoch
 
     def now(self) -> float:
         return self.time
+
+    def wall(self) -> float:
+        return self.epoch + self.time
 
     async def sleep(self, seconds: float) -> None:
         await self.sleep_until(self.time + seconds)
@@ -43,18 +59,23 @@ class VirtualClock:
 
     :meth:`run_until` lets every task settle (run until it waits again), wakes the earliest
     sleeper with the time set to its deadline, and repeats, so several tasks can sleep at
-    once and each sees exactly the time it asked for. Nothing sleeps in real time.
+    once and each sees exactly the time it asked for. Nothing sleeps in real time. Its wall
+    clock moves with it: ``epoch + time``.
     """
 
     SETTLE_ROUNDS = 20  # event-loop turns a woken task needs to reach its next wait
 
-    def __init__(self, start: float = 1000.0) -> None:
+    def __init__(self, start: float = 1000.0, *, epoch: float = EPOCH) -> None:
         self.time = start
+        self.epoch = epoch
         self._sleepers: list[tuple[float, int, asyncio.Future[None]]] = []
         self._order = itertools.count()
 
     def now(self) -> float:
         return self.time
+
+    def wall(self) -> float:
+        return self.epoch + self.time
 
     async def sleep(self, seconds: float) -> None:
         await self.sleep_until(self.time + seconds)

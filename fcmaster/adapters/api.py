@@ -155,7 +155,7 @@ def create_app(
     )
     app.router.route_class = StrictJsonRoute
     registry = streams if streams is not None else StreamRegistry()
-    viewer_reads = ViewerReads()
+    viewer_reads = ViewerReads(gateway.clock)
     app.state.auth = auth
 
     async def run(

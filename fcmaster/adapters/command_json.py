@@ -30,6 +30,7 @@ from typing import Any, Final
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan
 from fcmaster.errors import UsageError
+from fcmaster.protocol.drive import hz_to_pct, pct_to_hz
 
 _KEYS = {
     Action.START: {"frequency_hz", "reference_pct"},
@@ -106,10 +107,10 @@ def parse_command(payload: Any, drive: DrivePlan, *, actor: str) -> Command:
     if "frequency_hz" in payload:
         hz = _magnitude(payload, "frequency_hz")
         _check_limits(drive, Fraction(hz), f"{_show(hz)} Hz")
-        reference_pct = hz / drive.nominal_frequency_hz * 100.0
+        reference_pct = hz_to_pct(hz, drive.nominal_frequency_hz)
     elif "reference_pct" in payload:
         reference_pct = _magnitude(payload, "reference_pct")
-        exact = Fraction(reference_pct) * Fraction(drive.nominal_frequency_hz) / 100
+        exact = pct_to_hz(Fraction(reference_pct), Fraction(drive.nominal_frequency_hz))
         _check_limits(drive, exact, f"{_show(reference_pct)} % ({_show(float(exact))} Hz)")
     if action is Action.SET_REFERENCE and reference_pct is None:
         raise UsageError("set_reference needs frequency_hz or reference_pct")

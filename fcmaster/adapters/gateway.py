@@ -8,6 +8,7 @@ from typing import Any, Protocol
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.frame_log import FramesSince
 from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.clock import Clock
 from fcmaster.hub import Hub
 from fcmaster.state import FleetState
 
@@ -41,6 +42,10 @@ class LineInfo:
 
 class Gateway(Protocol):
     """The daemon as adapters see it (the Service meets this)."""
+
+    @property
+    def clock(self) -> Clock:
+        """The daemon's clock: what adapters wait on and stamp their messages with."""
 
     @property
     def hub(self) -> Hub:

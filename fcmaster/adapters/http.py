@@ -90,7 +90,7 @@ class HttpAdapter:
         self.metrics_enabled = metrics_enabled
         self.operator_token: str | None = None  # the demo's, once entered
         self._streams = StreamRegistry()
-        self.guard = ConnectionGuard()
+        self.guard = ConnectionGuard(clock=gateway.clock)
         self._server: _Server | None = None
         self._task: asyncio.Task[None] | None = None
         self._socket: socket.socket | None = None

@@ -33,13 +33,14 @@ cost beyond a dict lookup.
 from __future__ import annotations
 
 import asyncio
-import time
 from collections import OrderedDict
 from typing import Any, Final
 
 import h11
 import structlog
 from uvicorn.protocols.http.h11_impl import H11Protocol
+
+from fcmaster.clock import Clock
 
 log = structlog.get_logger("fcmaster.adapters.http")
 
@@ -59,12 +60,14 @@ class ConnectionGuard:
     def __init__(
         self,
         *,
+        clock: Clock,
         max_connections: int = MAX_CONNECTIONS,
         per_client: int = PER_CLIENT,
         reserve: int = RESERVE,
         head_timeout_s: float = HEAD_TIMEOUT_S,
         body_timeout_s: float = BODY_TIMEOUT_S,
     ) -> None:
+        self.clock = clock  # times the penalties below (the timeouts are the loop's timers)
         self.max_connections = max_connections
         self.per_client = per_client
         self.reserve = reserve
@@ -81,7 +84,7 @@ class ConnectionGuard:
 
     def penalise(self, host: str) -> None:
         """``host`` held a connection without using it (evicted, or timed out)."""
-        self.penalties[host] = time.monotonic() + self.head_timeout_s
+        self.penalties[host] = self.clock.now() + self.head_timeout_s
         self.penalties.move_to_end(host)
         if len(self.penalties) > MAX_PENALTIES:
             self.penalties.popitem(last=False)
@@ -90,7 +93,7 @@ class ConnectionGuard:
         until = self.penalties.get(host)
         if until is None:
             return False
-        if until > time.monotonic():
+        if until > self.clock.now():
             return True
         del self.penalties[host]
         return False

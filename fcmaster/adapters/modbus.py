@@ -37,8 +37,6 @@ import asyncio
 import contextlib
 import ipaddress
 import socket
-import time
-from collections.abc import Callable
 from types import TracebackType
 from typing import Any, Final
 
@@ -111,7 +109,6 @@ class ModbusAdapter:
         *,
         config: Config,
         demo: bool = False,
-        wall: Callable[[], float] = time.time,
         partial_frame_s: float = PARTIAL_FRAME_S,
         shutdown_grace_s: float = SHUTDOWN_GRACE_S,
     ) -> None:
@@ -120,7 +117,6 @@ class ModbusAdapter:
         self.shutdown_grace_s = shutdown_grace_s
         self.gateway = gateway
         self.map = register_map(config)
-        self._wall = wall
         self._allow = tuple(ipaddress.ip_network(n, strict=False) for n in model.allow or ())
         self._server: asyncio.Server | None = None
         self._connections: set[asyncio.Task[None]] = set()
@@ -308,7 +304,7 @@ class ModbusAdapter:
         state = self.gateway.fleet.get(unit.bus, unit.drive.name)
         if state is None:
             raise _Refused(ExceptionCode.GATEWAY_PATH_UNAVAILABLE)
-        words = unit.words(table, state, self._wall())
+        words = unit.words(table, state, self.gateway.clock.wall())
         return words[request.address : request.address + request.count]
 
     async def _write(self, unit: UnitMap, request: Request, actor: str) -> None:

@@ -31,6 +31,7 @@ from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.config import Config, modbus_units
 from fcmaster.errors import ConfigError
+from fcmaster.protocol.drive import pct_to_hz
 from fcmaster.protocol.registry import spec_for
 from fcmaster.state import DriveState
 
@@ -226,7 +227,7 @@ def _holdings(drive: DrivePlan) -> tuple[Register, ...]:
     nominal = drive.nominal_frequency_hz
 
     def reference_hz(state: DriveState) -> float | None:
-        return None if state.reference_pct is None else state.reference_pct * nominal / 100.0
+        return None if state.reference_pct is None else pct_to_hz(state.reference_pct, nominal)
 
     return (
         _u16("holding", COMMAND_ADDRESS, "command", lambda _state, _now: 0.0),

@@ -44,8 +44,7 @@ import random
 import secrets
 import socket
 import ssl
-import time
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from types import TracebackType
 from typing import Any
 from urllib.parse import urlsplit
@@ -67,7 +66,6 @@ from fcmaster.adapters.mqtt_topics import (
     event_payload,
     is_significant,
 )
-from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import MqttModel
 from fcmaster.errors import ConfigError
 from fcmaster.hub import EventsDropped, Subscription
@@ -95,20 +93,17 @@ class MqttAdapter:
         gateway: Gateway,
         *,
         demo: bool = False,
-        clock: Clock | None = None,
-        wall: Callable[[], float] = time.time,
         tokens: Iterable[tuple[str, str, str]] = (),
     ) -> None:
         """Bridge ``gateway`` to the broker ``model`` names; ConfigError for bad settings.
 
-        ``demo`` changes nothing here. ``clock`` paces the heartbeat and the reconnect
-        backoff; ``wall`` stamps events. ``tokens`` are ``http.tokens`` as ``(name, role,
+        ``demo`` changes nothing here. The gateway's clock paces the heartbeat and the
+        reconnect backoff and stamps events. ``tokens`` are ``http.tokens`` as ``(name, role,
         secret)``: with ``mqtt.commands`` on, a command carries one of the operator ones.
         """
         self._model = model
         self._gateway = gateway
-        self._clock = clock or MonotonicClock()
-        self._wall = wall
+        self._clock = gateway.clock
         self._topics = Topics(model.base_topic, model.status_topic)
         self.client_id = (
             model.client_id or f"fcmaster-{socket.gethostname()}-{secrets.token_hex(3)}"
@@ -265,7 +260,7 @@ class MqttAdapter:
                 self._outbox.retain(*discovery.value(state, name, measured.unit))
 
     def _file_event(self, bus: str, drive: str, event: str, **facts: Any) -> None:
-        at = rfc3339(self._wall())
+        at = rfc3339(self._clock.wall())
         self._outbox.event(
             self._topics.event(bus, drive), event_payload(event, bus, drive, at, **facts)
         )

@@ -15,6 +15,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Final
 
+from fcmaster.clock import Clock
 from fcmaster.errors import FcmasterError
 
 VIEWER_READ_GAP_S: Final = 0.5  # at most 2 viewer reads a second per line
@@ -28,7 +29,10 @@ class ReadsBusy(FcmasterError):
 class ViewerReads:
     """Per line: one viewer read at a time, one every ``gap_s``, ``max_waiting`` in line."""
 
-    def __init__(self, gap_s: float = VIEWER_READ_GAP_S, max_waiting: int = MAX_WAITING) -> None:
+    def __init__(
+        self, clock: Clock, gap_s: float = VIEWER_READ_GAP_S, max_waiting: int = MAX_WAITING
+    ) -> None:
+        self.clock = clock
         self.gap_s = gap_s
         self.max_waiting = max_waiting
         self._turns: dict[str, asyncio.Lock] = {}
@@ -41,17 +45,17 @@ class ViewerReads:
         if self._waiting.get(line, 0) >= self.max_waiting:
             raise ReadsBusy(f"{self.max_waiting} viewer reads already wait on {line}")
         lock = self._turns.setdefault(line, asyncio.Lock())
-        loop = asyncio.get_running_loop()
+        clock = self.clock
         self._waiting[line] = self._waiting.get(line, 0) + 1
         try:
             await lock.acquire()
         finally:
             self._waiting[line] -= 1
         try:
-            delay = self._next_at.get(line, 0.0) - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
+            next_at = self._next_at.get(line)
+            if next_at is not None:
+                await clock.sleep_until(next_at)
             yield
         finally:
-            self._next_at[line] = loop.time() + self.gap_s
+            self._next_at[line] = clock.now() + self.gap_s
             lock.release()

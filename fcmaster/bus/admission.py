@@ -15,7 +15,7 @@ from fcmaster.bus.plan import DrivePlan
 from fcmaster.bus.steps import DriveSlot, result_of
 from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import DriveCodec, Exchange
-from fcmaster.protocol.drive import ControlIntent, Motion
+from fcmaster.protocol.drive import ControlIntent, Motion, pct_to_hz
 
 # What one telegram to every drive may carry: whole states, never a change of part of one.
 BROADCASTS = frozenset((Action.START, Action.STOP, Action.COAST, Action.QUICK_STOP))
@@ -100,7 +100,7 @@ def build_access(codec: DriveCodec, slot: DriveSlot, command: Command) -> tuple[
 
 def beyond_limits(drive: DrivePlan, reference_pct: float) -> str:
     """Why ``reference_pct`` is outside the drive's configured frequencies ("" if it is not)."""
-    frequency = reference_pct * drive.nominal_frequency_hz / 100.0
+    frequency = pct_to_hz(reference_pct, drive.nominal_frequency_hz)
     if abs(frequency) > drive.max_frequency_hz + 1e-9:
         return (
             f"{frequency:g} Hz is beyond {drive.name}'s configured limit of "

@@ -23,6 +23,7 @@ from fcmaster.bus.commands import Action, CommandResult, Outcome
 from fcmaster.bus.steps import DriveSlot, Pending, result_of
 from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import DriveCodec, ParameterKey, Reply
+from fcmaster.protocol.drive import hz_to_pct
 from fcmaster.protocol.registry import spec_for
 
 CONFIRM_DEFAULT_S = 5.0  # a few seconds: a start shows at once, most stops take less
@@ -74,7 +75,7 @@ def confirm_time(slot: DriveSlot, pending: Pending) -> float:
     action = pending.command.action
     if action not in (Action.STOP, Action.QUICK_STOP) or slot.ramp_down_s is None:
         return CONFIRM_DEFAULT_S
-    scale = max(1.0, (slot.output_pct or 0.0) / 100.0)
+    scale = max(1.0, _pct(slot) / 100.0)
     return max(CONFIRM_DEFAULT_S, slot.ramp_down_s * scale + RAMP_GRACE_S)
 
 
@@ -104,8 +105,13 @@ def what_instead(slot: DriveSlot, wanted: bool, confirm_s: float) -> str:
         return f"no status from the drive within {confirm_s:g} s"
     word = "" if slot.status_word is None else f" (status word 0x{slot.status_word:04X})"
     if not wanted:
-        output = "" if slot.output_pct is None else f" at {slot.output_pct:.1f} % of nominal"
+        output = "" if slot.output_hz is None else f" at {_pct(slot):.1f} % of nominal"
         return f"still running{output} {confirm_s:g} s after the command{word}"
     if slot.fault:
         return f"not running after {confirm_s:g} s: the drive reports a fault{word}"
     return f"not running after {confirm_s:g} s: the drive reports ready but stopped{word}"
+
+
+def _pct(slot: DriveSlot) -> float:
+    """The drive's last reported output in % of its nominal frequency (0 when not known)."""
+    return hz_to_pct(slot.output_hz or 0.0, slot.plan.nominal_frequency_hz)

@@ -10,8 +10,8 @@ it missed when it fell more than the ring's length behind.
 from __future__ import annotations
 
 import itertools
-import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
 
@@ -35,13 +35,15 @@ class FramesSince:
 class FrameLog:
     """A bounded ring of the last frames on one line, oldest first."""
 
-    def __init__(self, length: int = FRAME_LOG_LENGTH) -> None:
+    def __init__(self, wall: Callable[[], float], length: int = FRAME_LOG_LENGTH) -> None:
+        """Keep the last ``length`` frames, each also stamped with ``wall()`` (Unix time)."""
+        self._wall = wall  # the line's clock's wall(): time.time itself on the real clock
         self._ring: deque[FrameRecord] = deque(maxlen=length)
         self._seq = itertools.count()
 
     def add(self, direction: str, data: bytes, at: float) -> None:
         """Record ``data`` sent or received at monotonic time ``at``."""
-        self._ring.append((next(self._seq), direction, at, time.time(), data))
+        self._ring.append((next(self._seq), direction, at, self._wall(), data))
 
     def since(self, seq: int = 0) -> FramesSince:
         """The frames numbered ``seq`` and after that are still in the ring."""

@@ -13,7 +13,7 @@ import dataclasses
 from fcmaster.bus.commands import Action, Command
 from fcmaster.bus.steps import DriveSlot, Pending
 from fcmaster.protocol.codec import ParameterKey, Reply
-from fcmaster.protocol.drive import ControlIntent, Motion
+from fcmaster.protocol.drive import ControlIntent, Motion, hz_to_pct
 
 STOPPING = (Motion.STOP, Motion.COAST, Motion.QUICK_STOP)
 REFERENCE_LIMIT_PCT = 199.99  # the most a reference can say (FC: 0x7FFF); adoption stays below
@@ -47,17 +47,16 @@ def learn(slot: DriveSlot, reply: Reply) -> None:
         slot.running = status.running
         if status.reverse is not None:
             slot.reverse = status.reverse
-    if reply.output_pct is not None:
-        slot.output_pct = abs(reply.output_pct)
-        if reply.output_pct:
-            slot.reverse = reply.output_pct < 0 if status is None else slot.reverse
-    elif reply.output_frequency_hz is not None and slot.plan.nominal_frequency_hz:
-        slot.output_pct = abs(reply.output_frequency_hz) / slot.plan.nominal_frequency_hz * 100
+    output = reply.output_frequency_hz
+    if output is not None:
+        slot.output_hz = abs(output)
+        if output and status is None:
+            slot.reverse = output < 0
 
 
 def forget(slot: DriveSlot) -> None:
     """What the drive was doing is no longer known: keep a stop, drop a motion."""
-    slot.running = slot.output_pct = None
+    slot.running = slot.output_hz = None
     if slot.intent is not None and slot.intent.motion not in STOPPING:
         slot.intent = None
 
@@ -70,13 +69,13 @@ def unknown(slot: DriveSlot) -> None:
     good status is adopted, as at start-up.
     """
     slot.intent = None
-    slot.running = slot.output_pct = None
+    slot.running = slot.output_hz = None
 
 
 def restarted(slot: DriveSlot, until: float) -> None:
     """The drive restarts and hears nothing until ``until``; its output is off."""
     slot.deaf_until = until
-    slot.running = slot.output_pct = None
+    slot.running = slot.output_hz = None
     if slot.intent is not None:
         slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP, reset=False)
 
@@ -130,9 +129,9 @@ def adopted(slot: DriveSlot) -> ControlIntent | None:
     """
     if slot.running is False:
         return ControlIntent(Motion.STOP)
-    if slot.running is None or slot.output_pct is None:
+    if slot.running is None or slot.output_hz is None:
         return None
-    pct = min(slot.output_pct, REFERENCE_LIMIT_PCT)
+    pct = min(hz_to_pct(slot.output_hz, slot.plan.nominal_frequency_hz), REFERENCE_LIMIT_PCT)
     return ControlIntent(Motion.RUN, slot.reverse, pct)
 
 

@@ -65,7 +65,7 @@ class Link:
         self._kinds: list[str] = [""] * RECORDED
         self._data: list[bytes] = [b""] * RECORDED
         self._recorded = 0
-        self.frames = FrameLog()  # the frames with their times, for captures
+        self.frames = FrameLog(clock.wall)  # the frames with their times, for captures
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
         self._plan_gap_s = plan.gap_s
         self.written_at = 0.0  # when the last request was written

@@ -51,7 +51,7 @@ from fcmaster.errors import (
     PortError,
 )
 from fcmaster.protocol.codec import DriveCodec, Reply
-from fcmaster.protocol.drive import ControlIntent
+from fcmaster.protocol.drive import ControlIntent, pct_to_hz
 
 log = structlog.get_logger("fcmaster.bus")
 
@@ -446,7 +446,7 @@ class BusMaster:
             slot = self.planner.find(drive)
             if slot is not None:
                 nominal = slot.plan.nominal_frequency_hz
-                values["frequency_hz"] = round(command.reference_pct * nominal / 100, 6)
+                values["frequency_hz"] = round(pct_to_hz(command.reference_pct, nominal), 6)
         if command.parameter is not None:
             values["parameter"] = command.parameter
             if command.index:

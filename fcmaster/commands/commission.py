@@ -27,7 +27,7 @@ from fcmaster.bus.stats import DriveStats
 from fcmaster.clock import MonotonicClock
 from fcmaster.errors import BusError, CommandError, UsageError
 from fcmaster.protocol.codec import DriveCodec, Reply
-from fcmaster.protocol.drive import ControlIntent
+from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, hz_to_pct, pct_to_hz
 from fcmaster.protocol.registry import spec_for
 from fcmaster.state import FleetState
 
@@ -167,15 +167,15 @@ def _progress(done: int, total: int, address: int, found: int) -> None:
 
 
 def _summary(address: int, reply: Reply) -> dict[str, Any]:
-    status = reply.status
+    status, hz = reply.status, reply.output_frequency_hz  # of a drive at the default nominal
     return {
         "address": address,
         "status_word": status.word if status else None,
         "running": bool(status and status.running),
         "fault": bool(status and status.fault),
         "warning": bool(status and status.warning),
-        "output_pct": reply.output_pct,
-        "output_frequency_hz": reply.output_frequency_hz,
+        "output_pct": None if hz is None else hz_to_pct(hz, DEFAULT_NOMINAL_HZ),
+        "output_frequency_hz": hz,
     }
 
 
@@ -309,13 +309,13 @@ async def control(
     plan = replace(options.plan((drive,)), offline_after=1)
     pct = reference_pct
     if frequency_hz is not None:
-        pct = frequency_hz / nominal_frequency_hz * 100.0
+        pct = hz_to_pct(frequency_hz, nominal_frequency_hz)
     if verb is Action.SET_REFERENCE and pct is None:
         raise UsageError("set_reference needs --frequency or --reference")
     if pct is not None and max_frequency_hz is None and abs(pct) > 100.0 + 1e-9:
         # The limit is the nominal frequency only because none was given: say how to give one.
         raise UsageError(
-            f"{pct * nominal_frequency_hz / 100.0:g} Hz is beyond the nominal "
+            f"{pct_to_hz(pct, nominal_frequency_hz):g} Hz is beyond the nominal "
             f"{nominal_frequency_hz:g} Hz; pass --max-frequency if the drive may run faster"
         )
     command = Command(action=verb, reference_pct=pct, actor="cli")

@@ -14,7 +14,6 @@ import json
 import os
 import shutil
 import sys
-import time
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any, TextIO
@@ -23,6 +22,7 @@ from urllib.parse import urlsplit, urlunsplit
 from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus, WebSocketException
 
+from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.errors import FcmasterError, UsageError
 
 _HOME, _CLEAR_LINE, _CLEAR_BELOW = "\x1b[H", "\x1b[K", "\x1b[J"
@@ -119,9 +119,8 @@ def _number(value: Any, digits: int) -> str:
     return "–" if not isinstance(value, int | float) else f"{value:.{digits}f}"
 
 
-def render_table(fleet: Fleet, *, width: int = 120, color: bool = False, now: float = 0.0) -> str:
-    """The fleet as text lines no wider than ``width``."""
-    now = now or time.time()
+def render_table(fleet: Fleet, *, now: float, width: int = 120, color: bool = False) -> str:
+    """The fleet as text lines no wider than ``width``, its ages as of ``now`` (Unix time)."""
     lines: list[str] = []
     status = "live" if fleet.connected else "disconnected — retrying"
     title = f"fcmaster monitor · {len(fleet.drives)} drives · {status}"
@@ -166,11 +165,14 @@ async def run(
     once: bool = False,
     interval_s: float = 0.5,
     out: TextIO | None = None,
+    clock: Clock | None = None,
 ) -> int:
     """Follow the daemon at ``url`` until interrupted (or, ``once``, print one table).
 
-    ``token`` None: the one in ``$FCM_TOKEN``, if any.
+    ``token`` None: the one in ``$FCM_TOKEN``, if any. ``clock`` paces the redraws and
+    reconnects and tells the readings' ages (default: the real one).
     """
+    clock = clock or MonotonicClock()
     out = out or sys.stdout
     token = token or os.environ.get("FCM_TOKEN")
     target = stream_url(url)
@@ -179,7 +181,9 @@ async def run(
     is_tty = out.isatty()
     backoff = 0.5
     changed = asyncio.Event()
-    painter = None if once else asyncio.create_task(_repaint(fleet, changed, out, interval_s))
+    painter = (
+        None if once else asyncio.create_task(_repaint(fleet, changed, out, interval_s, clock))
+    )
     try:
         while True:
             try:
@@ -189,7 +193,8 @@ async def run(
                         if fleet.apply(json.loads(raw)):
                             changed.set()
                         if once:
-                            print(render_table(fleet, width=_width(is_tty)), file=out)
+                            table = render_table(fleet, now=clock.wall(), width=_width(is_tty))
+                            print(table, file=out)
                             return 0
             except InvalidStatus as exc:
                 status = exc.response.status_code
@@ -199,7 +204,7 @@ async def run(
                     raise FcmasterError(f"cannot reach fcmaster at {url}: {exc}") from exc
                 fleet.connected = False
                 changed.set()
-            await asyncio.sleep(backoff)
+            await clock.sleep(backoff)
             backoff = min(backoff * 2, 10.0)
     finally:
         if painter is not None:
@@ -226,16 +231,18 @@ def _width(is_tty: bool) -> int:
     return shutil.get_terminal_size((120, 40)).columns if is_tty else 200
 
 
-async def _repaint(fleet: Fleet, changed: asyncio.Event, out: TextIO, interval_s: float) -> None:
+async def _repaint(
+    fleet: Fleet, changed: asyncio.Event, out: TextIO, interval_s: float, clock: Clock
+) -> None:
     is_tty = out.isatty()
     while True:
         await changed.wait()
         changed.clear()
-        table = render_table(fleet, width=_width(is_tty), color=is_tty)
+        table = render_table(fleet, now=clock.wall(), width=_width(is_tty), color=is_tty)
         if is_tty:
             body = "".join(line + _CLEAR_LINE + "\n" for line in table.splitlines())
             out.write(_HOME + body + _CLEAR_BELOW)
         else:
             out.write(table + "\n\n")
         out.flush()
-        await asyncio.sleep(interval_s)
+        await clock.sleep(interval_s)

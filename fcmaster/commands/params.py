@@ -91,7 +91,8 @@ def _progress(done: int, total: int, what: str) -> None:
 
 async def _read_drive(drive: _Drive, profile: SetProfile) -> ParameterSet:
     tty = sys.stderr.isatty()
-    now = datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
+    wall = drive.session.clock.wall()
+    now = datetime.fromtimestamp(wall, UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
     try:
         return await read_set(
             profile, drive.address, drive.read, saved_at=now, on_progress=_progress if tty else None

@@ -117,7 +117,8 @@ class Reply:
 
     address: int
     status: DriveStatus | None = None
-    output_pct: float | None = None  # of the nominal frequency
+    # The output frequency, negative while the reply says the motor turns in reverse (FC);
+    # protocols that report percent of nominal convert with the drive's nominal frequency.
     output_frequency_hz: float | None = None
     value: ParameterValue | None = None
     conditions: ConditionReport | None = None

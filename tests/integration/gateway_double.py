@@ -16,7 +16,7 @@ from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.bus.frame_log import FrameLog, FramesSince
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.stats import LineStats
-from fcmaster.clock import MonotonicClock
+from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.hub import Hub
 from fcmaster.protocol.codec import (
     Condition,
@@ -48,9 +48,15 @@ def done(_drive: str, _command: Command) -> CommandResult:
 class FakeGateway:
     """The daemon as an adapter sees it, built from a Hub, a FleetState and LineStats."""
 
-    def __init__(self, lines: tuple[LinePlan, ...] = (LINE,), respond: Respond = done) -> None:
+    def __init__(
+        self,
+        lines: tuple[LinePlan, ...] = (LINE,),
+        respond: Respond = done,
+        *,
+        clock: Clock | None = None,
+    ) -> None:
         self.plans = lines
-        self.clock = MonotonicClock()
+        self.clock = clock or MonotonicClock()
         self.hub = Hub()
         self.fleet = FleetState(lines, emit=self.hub.publish, clock=self.clock)
         self.stats = {line.name: LineStats(up_since=self.clock.now()) for line in lines}
@@ -86,7 +92,7 @@ class FakeGateway:
     def line_frames(self, name: str, since: int) -> tuple[LinePlan, FramesSince] | None:
         for line in self.plans:
             if line.name == name:
-                return line, self.frames.setdefault(name, FrameLog()).since(since)
+                return line, self.frames.setdefault(name, FrameLog(self.clock.wall)).since(since)
         return None
 
     async def execute(self, drive: str, command: Command) -> CommandResult:

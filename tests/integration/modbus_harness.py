@@ -22,7 +22,6 @@ from fcmaster.sim.line import SimLine
 from fcmaster.sim.service import sim_line
 from fcmaster.sim.transport import SimTransport
 from tests.integration.ports import free_port
-from tests.integration.waiting import wait_for
 
 CONFIG = """
 buses:
@@ -88,6 +87,12 @@ class Plant:
                 return drive
         raise KeyError(address)
 
+    def online(self, bus: str, name: str) -> bool:
+        """Whether the fleet shows drive ``name`` online."""
+        state = self.service.fleet.get(bus, name)
+        assert state is not None
+        return state.online
+
     def control_sent(self, bus: str, address: int, since: int = 0) -> set[tuple[int, int]]:
         """The (control word, reference) pairs sent to ``address`` in frames ``since`` on."""
         sent = set()
@@ -104,16 +109,18 @@ class Plant:
 
 @asynccontextmanager
 async def plant(
-    modbus: str = "{listen: 127.0.0.1:PORT, commands: true}", line2: str = "{}"
+    modbus: str = "{listen: 127.0.0.1:PORT, commands: true}",
+    line2: str = "{}",
+    clock: MonotonicClock | None = None,
 ) -> AsyncIterator[Plant]:
     """Run the daemon of :data:`CONFIG` with ``modbus`` as its section (PORT: a free one).
 
-    ``line2`` is the second line's ``simulation`` section.
+    ``line2`` is the second line's ``simulation`` section; ``clock`` the daemon's.
     """
     port = free_port()
     text = CONFIG.replace("MODBUS", modbus.replace("PORT", str(port)))
     parsed = config.parse(text.replace("SIMULATION", line2))
-    clock = MonotonicClock()
+    clock = clock or MonotonicClock()
     lines: dict[str, SimLine] = {}
     wires: dict[str, RecordingTransport] = {}
 
@@ -127,9 +134,17 @@ async def plant(
     service = Service(parsed, clock=clock, transport_factory=transport)
     task = asyncio.create_task(service.run(install_signals=False), name="test.service")
     try:
-        await wait_for(lambda: all(s.online for s in service.fleet.snapshot()) or task.done())
-        if task.done():
+        online = asyncio.create_task(
+            service.hub.wait_for(
+                lambda: all(s.online for s in service.fleet.snapshot()), timeout_s=10
+            )
+        )
+        await asyncio.wait((online, task), return_when=asyncio.FIRST_COMPLETED)
+        if task.done():  # the service ended (failed) before its drives came online
+            online.cancel()
             task.result()
+        else:
+            online.result()
         yield Plant(service, port, lines, wires)
     finally:
         service.stop()

@@ -8,6 +8,7 @@ from typing import Any
 
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.clock import Clock
 from tests.integration import gateway_double
 from tests.integration.gateway_double import Respond, done
 
@@ -27,8 +28,8 @@ LINES = (
 class FakeGateway(gateway_double.FakeGateway):
     """The shared gateway double over :data:`LINES`."""
 
-    def __init__(self, respond: Respond = done) -> None:
-        super().__init__(LINES, respond)
+    def __init__(self, respond: Respond = done, *, clock: Clock | None = None) -> None:
+        super().__init__(LINES, respond, clock=clock)
 
 
 class Gate:

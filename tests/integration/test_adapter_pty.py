@@ -62,9 +62,7 @@ async def test_the_adapter_found_at_open_is_shown_on_its_line(
         service = Service(parse(CONFIG.format(port=server.device)))
         runner = asyncio.create_task(service.run(install_signals=False))
         try:
-            async with asyncio.timeout(20):
-                while not service.lines()[0].up:  # noqa: ASYNC110 - nothing signals "up"
-                    await asyncio.sleep(0.02)
+            await service.hub.wait_for(lambda: service.lines()[0].up, timeout_s=20)
             [shown] = service.lines()
         finally:
             service.stop()

@@ -36,7 +36,7 @@ async def test_a_capture_holds_the_frames_after_its_start_in_order_and_counts_mi
     tmp_path: Path,
 ) -> None:
     gateway = FakeGateway()
-    log = gateway.frames["line1"] = FrameLog(length=8)
+    log = gateway.frames["line1"] = FrameLog(gateway.clock.wall, length=8)
     log.add(TX, b"before", 1.0)  # in the ring before the capture: not part of it
     output = tmp_path / "line1.pcapng"
     said = io.StringIO()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -19,6 +19,7 @@ from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
+from fcmaster.hub import Hub
 from fcmaster.protocol.enc import StateWord
 from fcmaster.sim.build import build_line
 from fcmaster.sim.enc import EncSimDrive
@@ -41,6 +42,11 @@ class Line:
     server: PtyServer
     master: BusMaster
     fleet: FleetState
+    hub: Hub
+
+    async def until(self, condition: Callable[[], object], timeout_s: float = 10.0) -> None:
+        """Wait until ``condition`` holds, checked at each change the fleet publishes."""
+        await self.hub.wait_for(condition, timeout_s=timeout_s)
 
     def drive(self, address: int) -> EncSimDrive:
         found = next(d for d in self.server.line.drives if d.address == address)
@@ -81,12 +87,13 @@ async def enc_line(
             drives=drives, offline_after=5, probe_interval_s=0.5, response_delay_s=0.005,
             address_encoding=encoding, response_encoding=encoding, fault_encoding=encoding,
         )  # fmt: skip
-        fleet = FleetState((plan,), emit=lambda event: None, clock=clock)
+        hub = Hub()
+        fleet = FleetState((plan,), emit=hub.publish, clock=clock)
         transport = SerialTransport(plan.port, baudrate=BAUDRATE, parity=plan.parity)
         async with BusMaster(
             plan, codec=codec_for(plan), transport=transport, clock=clock, observer=fleet
         ) as master:
-            yield Line(server, master, fleet)
+            yield Line(server, master, fleet, hub)
 
 
 def state(line: Line, name: str) -> dict[str, Any]:
@@ -99,7 +106,7 @@ async def test_polls_refresh_state_and_frequency_of_every_drive() -> None:
     running = DriveSettings(response_delay_s=0.005, parameters=RAMPS, running_hz=30.0)
     async with enc_line(settings={2: running}) as line:
         await wait_for(lambda: all(s.online for s in line.master.planner.slots))
-        await wait_for(lambda: state(line, "d2")["output_frequency_hz"] is not None)
+        await line.until(lambda: state(line, "d2")["output_frequency_hz"] is not None)
         d2 = state(line, "d2")
         assert d2["running"] is True
         assert d2["protocol"] == "enc"
@@ -116,10 +123,10 @@ async def test_start_with_frequency_stop_emergency_stop_and_reset() -> None:
         await wait_for(lambda: line.master.planner.slot("d1").online)
         d1, sim = orders(line.master, "d1"), line.drive(1)
         assert (await d1.start(frequency_hz=40.0)).outcome is Outcome.DONE
-        await wait_for(lambda: state(line, "d1")["output_frequency_hz"] == 40.0)
+        await line.until(lambda: state(line, "d1")["output_frequency_hz"] == 40.0)
         assert state(line, "d1")["running"] is True
         assert (await d1.stop()).outcome is Outcome.DONE
-        await wait_for(lambda: state(line, "d1")["running"] is False)
+        await line.until(lambda: state(line, "d1")["running"] is False)
 
         assert (await d1.start(frequency_hz=25.0)).outcome is Outcome.DONE
         await wait_for(lambda: sim.motor.frequency_hz > 20.0)
@@ -129,7 +136,7 @@ async def test_start_with_frequency_stop_emergency_stop_and_reset() -> None:
         assert not sim.motor.output_on
 
         sim.control.raise_fault(10, MonotonicClock().now())  # inverter overheat
-        await wait_for(lambda: state(line, "d1")["fault"] is True)
+        await line.until(lambda: state(line, "d1")["fault"] is True)
         assert state(line, "d1")["alarms"] == [{"code": 10, "text": "Inverter overheat"}]
         refused = await d1.reset()
         assert refused.outcome is Outcome.REFUSED  # the cause is still there: response 30
@@ -137,7 +144,7 @@ async def test_start_with_frequency_stop_emergency_stop_and_reset() -> None:
         assert refused.error.code == 30
         sim.control.clear_fault(10, MonotonicClock().now())
         assert (await d1.reset()).outcome is Outcome.DONE
-        await wait_for(lambda: state(line, "d1")["fault"] is False)
+        await line.until(lambda: state(line, "d1")["fault"] is False)
         assert state(line, "d1")["alarms"] == []
         assert not sim.motor.output_on  # a reset never restarts the motor
 
@@ -184,7 +191,7 @@ async def test_decimal_encodings_end_to_end() -> None:
     async with enc_line(encoding="decimal") as line:
         await wait_for(lambda: all(s.online for s in line.master.planner.slots))
         line.drive(3).control.raise_fault(16, MonotonicClock().now())
-        await wait_for(lambda: state(line, "d3")["fault"] is True)
+        await line.until(lambda: state(line, "d3")["fault"] is True)
         assert state(line, "d3")["alarms"] == [{"code": 16, "text": "RS-485 communication fault"}]
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from fcmaster.bus.commands import Action, Command, Outcome
 from fcmaster.config import load
 from fcmaster.service import Service
+from tests.integration.waiting import drive_where
 
 CONFIG = """
 buses:
@@ -32,9 +33,9 @@ buses:
 
 async def wait_for_state(service: Service, check: str, timeout_s: float = 15.0) -> None:
     """Until every drive state satisfies ``check`` (a key that must be true)."""
-    async with asyncio.timeout(timeout_s):
-        while not all(getattr(s, check) for s in service.fleet.snapshot()):  # noqa: ASYNC110
-            await asyncio.sleep(0.05)  # the fleet's state signals nothing to wait on
+    await service.hub.wait_for(
+        lambda: all(getattr(s, check) for s in service.fleet.snapshot()), timeout_s=timeout_s
+    )
 
 
 async def test_a_simulated_enc_line_shows_drive_states_and_obeys_commands(tmp_path: Path) -> None:
@@ -44,11 +45,13 @@ async def test_a_simulated_enc_line_shows_drive_states_and_obeys_commands(tmp_pa
     runner = asyncio.create_task(service.run(install_signals=False))
     try:
         await wait_for_state(service, "online")
-        async with asyncio.timeout(15):
-            while (fan := service.fleet.get("enc-line", "fan")) is None or (  # noqa: ASYNC110
-                fan.output_frequency_hz is None or "F0.08" not in fan.to_json()["values"]
-            ):
-                await asyncio.sleep(0.05)
+        fan = await drive_where(
+            service.hub,
+            service.fleet,
+            "enc-line",
+            "fan",
+            lambda s: s.output_frequency_hz is not None and "F0.08" in s.to_json()["values"],
+        )
         fan_state = fan.to_json()
         assert fan_state["protocol"] == "enc"
         assert fan_state["control"] == "monitor"
@@ -60,13 +63,13 @@ async def test_a_simulated_enc_line_shows_drive_states_and_obeys_commands(tmp_pa
             "conveyor", Command(action=Action.START, reference_pct=60.0, actor="test")
         )
         assert result.outcome is Outcome.DONE
-        async with asyncio.timeout(15):
-            while True:
-                conveyor = service.fleet.get("enc-line", "conveyor")
-                assert conveyor is not None
-                if conveyor.output_frequency_hz == 30.0:  # 60 % of 50 Hz
-                    break
-                await asyncio.sleep(0.05)
+        conveyor = await drive_where(
+            service.hub,
+            service.fleet,
+            "enc-line",
+            "conveyor",
+            lambda s: s.output_frequency_hz == 30.0,  # 60 % of 50 Hz
+        )
         assert conveyor.running
 
         refused = await service.execute("fan", Command(action=Action.STOP, actor="test"))

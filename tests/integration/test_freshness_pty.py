@@ -29,6 +29,7 @@ from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.state import DriveState, DriveUpdated, Event, FleetState
+from tests.fakes import WallShiftedClock
 from tests.integration.waiting import wait_for
 from tests.orders import orders
 
@@ -94,7 +95,7 @@ class Recorder:
 @pytest.mark.parametrize("protocol", sorted(LINES))
 async def test_no_state_shows_an_old_frequency_under_a_new_time(protocol: str) -> None:
     settings, ramps, template = LINES[protocol]
-    clock = MonotonicClock()
+    clock: MonotonicClock = WallShiftedClock(lambda: WALL0 + clock.now())
     line = build_line(
         settings, [(1, DriveSettings(response_delay_s=0.005, parameters=ramps))], clock=clock
     )
@@ -106,7 +107,7 @@ async def test_no_state_shows_an_old_frequency_under_a_new_time(protocol: str) -
 
     async with asyncio.timeout(LIMIT_S), PtyServer(line, clock=clock) as server:
         plan = with_protocol_delay(dataclasses.replace(template, port=server.device))
-        fleet = FleetState((plan,), emit=keep, clock=clock, wall=lambda: WALL0 + clock.now())
+        fleet = FleetState((plan,), emit=keep, clock=clock)
         recorder = Recorder(fleet)
         transport = SerialTransport(
             plan.port, baudrate=plan.baudrate, parity=plan.parity, stopbits=plan.stopbits

@@ -153,7 +153,7 @@ async def test_a_line_s_history_has_its_rates(
 async def test_a_line_s_frames_come_numbered_so_a_follower_misses_none(
     gateway: FakeGateway, client: httpx.AsyncClient
 ) -> None:
-    log = gateway.frames.setdefault("line1", FrameLog())
+    log = gateway.frames.setdefault("line1", FrameLog(gateway.clock.wall))
     log.add(TX, b"\x02\x0e\x01", 10.0)
     log.add(RX, b"\x02\x0e\x01\x33", 10.02)
     response = await client.get("/api/v1/buses/line1/frames", headers=VIEWER)

@@ -20,6 +20,7 @@ import pytest
 from fcmaster.adapters.http import HttpAdapter
 from fcmaster.adapters.http_guard import ConnectionGuard
 from fcmaster.bus.commands import Command, CommandResult, Outcome
+from fcmaster.clock import MonotonicClock
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import OPERATOR, VIEWER, http_model
 
@@ -74,7 +75,9 @@ async def _stop(adapter: HttpAdapter) -> tuple[httpx.Response, float]:
 
 async def test_idle_and_half_open_connections_make_room_for_an_operator_stop() -> None:
     gateway = FakeGateway()
-    guard = ConnectionGuard(max_connections=30, per_client=100, reserve=4, head_timeout_s=60)
+    guard = ConnectionGuard(
+        clock=MonotonicClock(), max_connections=30, per_client=100, reserve=4, head_timeout_s=60
+    )
     async with guarded(gateway, guard) as adapter:
         idle = [await _connect(adapter, n) for n in range(30)]
         half = [
@@ -95,7 +98,7 @@ async def test_idle_and_half_open_connections_make_room_for_an_operator_stop() -
 
 
 async def test_a_connection_that_sends_nothing_or_half_a_request_is_closed_in_time() -> None:
-    guard = ConnectionGuard(head_timeout_s=0.5, body_timeout_s=0.5)
+    guard = ConnectionGuard(clock=MonotonicClock(), head_timeout_s=0.5, body_timeout_s=0.5)
     async with guarded(FakeGateway(), guard) as adapter:
         silent = await _connect(adapter, 1)
         half_head = await _connect(adapter, 2, b"GET /api/v1/drives HTTP/1.1\r\nHost: x")
@@ -114,7 +117,7 @@ async def test_a_connection_that_sends_nothing_or_half_a_request_is_closed_in_ti
 
 
 async def test_one_client_cannot_hold_more_than_its_share() -> None:
-    guard = ConnectionGuard(per_client=5, head_timeout_s=60)
+    guard = ConnectionGuard(clock=MonotonicClock(), per_client=5, head_timeout_s=60)
     async with guarded(FakeGateway(), guard) as adapter:
         first = [await _connect(adapter, 0) for _ in range(5)]
         sixth = await _connect(adapter, 0)
@@ -134,7 +137,7 @@ async def test_when_every_connection_is_busy_the_reserve_takes_stops_only() -> N
         return CommandResult(outcome=Outcome.DONE)
 
     gateway = FakeGateway(respond=slow)
-    guard = ConnectionGuard(max_connections=6, reserve=2, head_timeout_s=60)
+    guard = ConnectionGuard(clock=MonotonicClock(), max_connections=6, reserve=2, head_timeout_s=60)
     async with guarded(gateway, guard) as adapter:
         busy = []
         for n in range(6):  # six operator reads that wait for the line: nothing idle

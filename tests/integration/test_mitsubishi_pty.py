@@ -74,7 +74,7 @@ async def test_polls_commands_and_parameter_access_over_the_pty() -> None:
         assert drive.control.set_hz == 30.0  # HED 0BB8 reached the drive
         await wait_for(lambda: abs(drive.motor.frequency_hz - 30.0) < 0.01)
         slot = master.planner.slot("d1")
-        await wait_for(lambda: slot.output_pct is not None and slot.output_pct > 59.0)
+        await wait_for(lambda: slot.output_hz is not None and slot.output_hz > 29.5)  # 59 % of 50
         changed = await d1.set_reference(frequency_hz=20.0)
         assert changed.outcome is Outcome.DONE, changed.reason
         assert drive.control.set_hz == 20.0

@@ -10,6 +10,7 @@ from fcmaster.bus.commands import Action, Command, Outcome
 from fcmaster.config import load
 from fcmaster.service import Service
 from fcmaster.state import DriveState
+from tests.integration.waiting import drive_where
 
 CONFIG = """
 buses:
@@ -37,12 +38,7 @@ async def wait_for(
     service: Service, name: str, check: Callable[[DriveState], object], timeout_s: float = 15.0
 ) -> DriveState:
     """Until drive ``name``'s state satisfies ``check``; that state."""
-    async with asyncio.timeout(timeout_s):
-        while True:
-            state = service.fleet.get("mitsu", name)
-            if state is not None and check(state):
-                return state
-            await asyncio.sleep(0.05)  # the fleet's state signals nothing to wait on
+    return await drive_where(service.hub, service.fleet, "mitsu", name, check, timeout_s)
 
 
 async def test_a_simulated_mitsubishi_line_shows_drive_states_and_obeys_commands(

@@ -13,7 +13,9 @@ import pytest
 from structlog.testing import capture_logs
 
 from fcmaster import config
+from fcmaster.clock import MonotonicClock
 from fcmaster.service import Service
+from tests.fakes import WallShiftedClock
 from tests.integration.modbus_client import Client, ModbusError, f32, i32, is_nan
 from tests.integration.modbus_harness import Plant, plant
 from tests.integration.ports import free_port
@@ -39,9 +41,28 @@ def values_read(plant: Plant) -> bool:
     return state is not None and {"16-13", "16-14", "16-30", "16-90"} <= set(state.values)
 
 
+async def test_register_ages_are_told_by_the_daemons_clock() -> None:
+    # A wall clock 25 years behind the machine's: had the adapter read the machine's own,
+    # every age would be beyond its range (the unknown mark, 0xFFFF).
+    clock: MonotonicClock = WallShiftedClock(lambda: 1_000_000_000.0 + clock.now())
+    async with (
+        asyncio.timeout(LIMIT_S),
+        plant(clock=clock) as running,
+        Client(HOST, running.port) as client,
+    ):
+        await running.service.hub.wait_for(lambda: values_read(running), timeout_s=10)
+        state = running.service.fleet.get("line1", "pump-1")
+        assert state is not None
+        assert state.updated_at is not None
+        assert abs(state.updated_at - clock.wall()) < 5.0  # the fleet stamps with it too
+        words = await client.read_input(1, 0, 2)
+        assert words[0] == 1  # online
+        assert words[1] < 20  # age_s in 0.1 s: polled moments ago
+
+
 async def test_input_registers_show_the_simulated_drives() -> None:
     async with asyncio.timeout(LIMIT_S), plant() as running, Client(HOST, running.port) as client:
-        await wait_for(lambda: values_read(running))
+        await running.service.hub.wait_for(lambda: values_read(running), timeout_s=10)
         words = await client.read_input(1, 0, 32)
         drive = running.drive("line1", 1)
         assert words[0] == 1  # online
@@ -183,7 +204,9 @@ async def test_an_offline_drive_reads_online_0_its_age_and_unknown_values() -> N
         assert fresh[2] != 0xFFFF
         assert not is_nan(fresh[16:18])
         state = running.service.fleet.get("line2", "pump-3")
-        await wait_for(lambda: not running.service.fleet.get("line2", "pump-3").online, 15)  # type: ignore[union-attr]
+        await running.service.hub.wait_for(
+            lambda: not running.online("line2", "pump-3"), timeout_s=15
+        )
         words = await client.read_input(11, 0, 20)
         assert words[0] == 0
         assert 0 < words[1] < 600  # tenths of a second since the last good reply
@@ -202,7 +225,9 @@ async def test_a_silent_drive_answers_0x0b_and_a_line_that_is_down_0x0a() -> Non
         plant(line2=silent) as running,
         Client(HOST, running.port) as client,
     ):
-        await wait_for(lambda: not running.service.fleet.get("line2", "pump-3").online, 15)  # type: ignore[union-attr]
+        await running.service.hub.wait_for(
+            lambda: not running.online("line2", "pump-3"), timeout_s=15
+        )
         with pytest.raises(ModbusError) as no_answer:
             await client.write_single(11, 0, 2)  # stop: tried, retried, no answer
         assert no_answer.value.code == 0x0B

@@ -7,7 +7,6 @@ import asyncio
 import contextlib
 import random
 import struct
-import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
@@ -18,6 +17,7 @@ from fcmaster.adapters.modbus import ModbusAdapter
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.config import ModbusModel, parse
 from fcmaster.protocol.codec import DriveError
+from tests.fakes import WallShiftedClock
 from tests.integration.gateway_double import FakeGateway, Respond, done
 from tests.integration.modbus_client import Client, ModbusError, f32
 from tests.integration.mqtt_gateway import Gate
@@ -44,11 +44,10 @@ async def serving(
     partial_frame_s: float = 5.0,
 ) -> AsyncIterator[tuple[FakeGateway, ModbusAdapter]]:
     config = parse(CONFIG)
-    gateway = FakeGateway(config.lines, respond)
+    clock = None if wall is None else WallShiftedClock(wall)
+    gateway = FakeGateway(config.lines, respond, clock=clock)
     model = ModbusModel(listen="127.0.0.1:0", commands=commands)
-    adapter = ModbusAdapter(
-        model, gateway, config=config, partial_frame_s=partial_frame_s, wall=wall or time.time
-    )
+    adapter = ModbusAdapter(model, gateway, config=config, partial_frame_s=partial_frame_s)
     async with asyncio.timeout(LIMIT_S), adapter:
         yield gateway, adapter
 

@@ -12,6 +12,7 @@ import pytest
 from fcmaster.adapters.mqtt import MqttAdapter
 from fcmaster.config import MqttModel, parse
 from fcmaster.service import Service
+from tests.fakes import WallShiftedClock
 from tests.integration.mosquitto import Broker, Recorder, payload_text
 from tests.integration.mqtt_gateway import FakeGateway
 
@@ -160,3 +161,20 @@ async def test_alarm_and_availability_changes_are_events(broker: Broker) -> None
         assert not any(m.retain for m in watcher.on(f"{base}/event"))
         state = watcher.json_on(f"{base}/state")[-1]
         assert state["online"] is False
+
+
+async def test_events_are_stamped_by_the_gateways_clock(broker: Broker) -> None:
+    wall = 1_790_000_009.75  # `date -u -d @1790000009.75`: 2026-09-21T14:13:29.750Z
+    gateway = FakeGateway(clock=WallShiftedClock(lambda: wall))
+    gateway.reply("fan-2")
+    base = "fcmaster/line1/fan-2"
+    async with (
+        asyncio.timeout(LIMIT_S),
+        Recorder(broker, f"{base}/event") as watcher,
+        MqttAdapter(model(broker), gateway) as adapter,
+    ):
+        await adapter.connected.wait()
+        gateway.reply("fan-2", alarms=((14, "Earth fault"),))
+        await watcher.wait_count(f"{base}/event", 1)
+        (event,) = watcher.json_on(f"{base}/event")
+        assert (event["event"], event["at"]) == ("alarm_raised", "2026-09-21T14:13:29.750Z")

@@ -70,9 +70,9 @@ async def _serve_and_run(
         service = Service(load(config))
         runner = asyncio.create_task(service.run(install_signals=False))
         try:
-            async with asyncio.timeout(20):
-                while not all(s.online for s in service.fleet.snapshot()):  # noqa: ASYNC110
-                    await asyncio.sleep(0.05)  # the fleet's state signals nothing to wait on
+            await service.hub.wait_for(
+                lambda: all(s.online for s in service.fleet.snapshot()), timeout_s=20
+            )
             pump = service.fleet.get("north", "pump-1")
             assert pump is not None
             assert pump.running  # found running at 30 Hz, adopted as it is

@@ -3,14 +3,18 @@ import asyncio
 import pytest
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.hub import EventsDropped, Hub
+from fcmaster.protocol.codec import DriveStatus, Reply
 from fcmaster.state import (
     AvailabilityChanged,
     CommandCompleted,
     ConditionChanged,
     DriveState,
     DriveUpdated,
+    FleetState,
 )
+from tests.fakes import FakeClock
 
 
 def _state(name: str, bus: str = "line1", hz: float | None = None) -> DriveState:
@@ -146,3 +150,87 @@ def test_snapshots_never_count_as_dropped(max_events: int) -> None:
     for i in range(100):
         hub.publish(DriveUpdated(_state("a", hz=float(i))))
     assert sub.dropped == 0
+
+
+async def _settle() -> None:
+    for _ in range(5):
+        await asyncio.sleep(0)
+
+
+async def test_wait_for_returns_at_once_when_the_condition_already_holds() -> None:
+    hub = Hub()
+    assert await hub.wait_for(lambda: "there") == "there"
+
+
+async def test_wait_for_checks_again_after_each_publication_and_returns_what_it_found() -> None:
+    hub = Hub()
+    seen: list[float | None] = []
+    latest: list[DriveState] = []
+
+    def fast_enough() -> DriveState | None:
+        state = latest[-1] if latest else None
+        seen.append(None if state is None else state.output_frequency_hz)
+        return state if state is not None and (state.output_frequency_hz or 0.0) > 20.0 else None
+
+    waiting = asyncio.create_task(hub.wait_for(fast_enough))
+    await _settle()
+    assert seen == [None]  # checked once, then it waits: no polling
+    assert hub.waiting == 1
+    await _settle()
+    assert seen == [None]
+    for hz in (10.0, 30.0):
+        latest.append(_state("pump-1", hz=hz))
+        hub.publish(DriveUpdated(latest[-1]))
+        await _settle()
+    assert seen == [None, 10.0, 30.0]
+    assert waiting.done()
+    assert (await waiting).output_frequency_hz == 30.0
+
+
+async def test_a_wait_that_times_out_leaves_the_hub_working() -> None:
+    hub = Hub()
+    sub = hub.subscribe()
+    with pytest.raises(TimeoutError):
+        await hub.wait_for(lambda: False, timeout_s=0)
+    assert hub.waiting == 0  # the timed-out waiter left nothing behind
+    hub.publish(_alarm("pump-1", 13))  # wakes nobody
+    assert sub.get_nowait() == _alarm("pump-1", 13)
+    assert await hub.wait_for(lambda: sub.pending == 0) is True
+
+
+async def test_several_waiters_wake_on_one_publication() -> None:
+    hub = Hub()
+    ready: list[str] = []
+    first = asyncio.create_task(hub.wait_for(lambda: "a" in ready))
+    second = asyncio.create_task(hub.wait_for(lambda: "b" in ready))
+    await _settle()
+    ready.extend("ab")
+    hub.publish(_alarm("pump-1", 9))
+    await _settle()
+    assert first.done()
+    assert second.done()
+
+
+async def test_a_wait_on_the_fleet_state_ends_with_the_reply_that_makes_it_true() -> None:
+    hub, clock = Hub(), FakeClock()
+    plan = DrivePlan(name="pump-1", address=1)
+    fleet = FleetState(
+        (LinePlan(name="line1", port="sim://line1", drives=(plan,)),),
+        emit=hub.publish,
+        clock=clock,
+    )
+
+    def running() -> DriveState | None:
+        state = fleet.get("line1", "pump-1")
+        return state if state is not None and state.running else None
+
+    waiting = asyncio.create_task(hub.wait_for(running))
+    status = DriveStatus(word=0x0607, running=False, fault=False, warning=False, at_reference=False)
+    fleet.drive_replied("line1", plan, Reply(address=1, status=status), clock.now(), None)
+    await _settle()
+    assert not waiting.done()  # online now, but not running
+    status = DriveStatus(word=0x0E07, running=True, fault=False, warning=False, at_reference=True)
+    fleet.drive_replied("line1", plan, Reply(address=1, status=status), clock.now(), None)
+    await _settle()
+    assert waiting.done()
+    assert (await waiting).status_word == 0x0E07

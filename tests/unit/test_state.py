@@ -26,10 +26,8 @@ WALL_AT_START = 1_790_000_000.0
 
 def _fleet() -> tuple[FleetState, list[Event], FakeClock]:
     events: list[Event] = []
-    clock = FakeClock(start=500.0)
-    fleet = FleetState(
-        (LINE,), emit=events.append, clock=clock, wall=lambda: WALL_AT_START + clock.now() - 500.0
-    )
+    clock = FakeClock(start=500.0, epoch=WALL_AT_START - 500.0)
+    fleet = FleetState((LINE,), emit=events.append, clock=clock)
     return fleet, events, clock
 
 
@@ -79,7 +77,10 @@ def test_every_drive_starts_offline_with_the_public_json_keys() -> None:
 
 def test_a_reply_sets_status_frequency_and_the_time_it_arrived() -> None:
     fleet, events, clock = _fleet()
-    reply = Reply(address=1, status=_status(running=True, at_reference=True), output_pct=50.0)
+    # 50 % of a 60 Hz nominal, in the unit every codec reports it in
+    reply = Reply(
+        address=1, status=_status(running=True, at_reference=True), output_frequency_hz=30.0
+    )
     clock.time = 510.0
     fleet.drive_replied("line1", PUMP, reply, 509.75, ControlIntent(Motion.RUN, False, 50.0))
     state = fleet.get("line1", "pump-1")
@@ -275,7 +276,7 @@ def test_an_unchanged_reading_still_refreshes_the_times_the_snapshot_shows() -> 
     current = ParameterValue(
         parameter=ParameterKey("16-14", 1614), index=0, raw=882, value=8.82, unit="A"
     )
-    steady = Reply(address=1, status=_status(running=True), output_pct=50.0, value=current)
+    steady = Reply(address=1, status=_status(running=True), output_frequency_hz=30.0, value=current)
     fleet.drive_replied("line1", PUMP, steady, 500.0, None)
     events.clear()
     clock.time = 501.5

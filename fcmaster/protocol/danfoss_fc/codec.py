@@ -58,7 +58,7 @@ from fcmaster.protocol.danfoss_fc.words import (
     decode_warning_word,
     decode_warning_word_2,
 )
-from fcmaster.protocol.drive import ControlIntent
+from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, pct_to_hz
 from fcmaster.protocol.polls import PollCache
 
 # Plain ints: a reply is decoded on every transaction, and masking an int with an IntFlag
@@ -70,6 +70,8 @@ _AT_REFERENCE: Final = int(StatusWord.AT_REFERENCE)
 _BUS_CONTROL: Final = int(StatusWord.BUS_CONTROL)
 _TEXT_REPLY_LENGTH: Final = LGE_TEXT_BASE + DEFAULT_MAX_TEXT_LENGTH + 2
 _INFINITY: Final = float("inf")
+_PCT_PER_STEP: Final = decode_reference(1)
+_DEFAULT_HZ_PER_STEP: Final = pct_to_hz(_PCT_PER_STEP, DEFAULT_NOMINAL_HZ)
 
 # parameter → (kind, decoder) for the words that carry alarms and warnings (§9)
 _CONDITION_WORDS: Final = {
@@ -89,11 +91,11 @@ WARNING_WORD: Final = _key(1692)
 DEFAULT_MONITOR: Final = tuple(_key(p) for p in (1613, 1614, 1612, 1610, 1630, 1690, 1692))
 
 
-def decode_status(word: int, output_pct: float) -> DriveStatus:
+def decode_status(word: int, output: float) -> DriveStatus:
     """The vendor-neutral reading of an FC status word (§8.4).
 
-    The status word has no direction bit; the sign of the main actual value tells it
-    while the motor turns.
+    The status word has no direction bit; the sign of the main actual value (``output``,
+    in any unit) tells it while the motor turns.
     """
     return DriveStatus(
         word=word,
@@ -101,7 +103,7 @@ def decode_status(word: int, output_pct: float) -> DriveStatus:
         fault=bool(word & _FAULT_BITS),
         warning=bool(word & _WARNING),
         at_reference=bool(word & _AT_REFERENCE),
-        reverse=None if output_pct == 0 else output_pct < 0,
+        reverse=None if output == 0 else output < 0,
         accepts_bus_control=bool(word & _BUS_CONTROL),
     )
 
@@ -112,8 +114,22 @@ class FcCodec:
     protocol = "danfoss-fc"
     can_broadcast = True  # ADR 0x80 / 0x20, obeyed and never answered (§5.2)
 
-    def __init__(self, address_format: AddressFormat = AddressFormat.FORMAT_126) -> None:
+    def __init__(
+        self,
+        address_format: AddressFormat = AddressFormat.FORMAT_126,
+        *,
+        nominal_hz: dict[int, float] | None = None,
+    ) -> None:
+        """Set up for a line of ``address_format``.
+
+        ``nominal_hz``: per address, the frequency that 100 % means (default 50). The
+        main actual value is a percentage of it; replies carry it in Hz.
+        """
         self.address_format = address_format
+        # Hz per step of the main actual value, worked out once per drive, so a reply pays
+        # one multiplication (exact for a whole-Hz nominal: the step is a power of two).
+        nominal_hz = nominal_hz or {}
+        self._hz_per_step = {a: pct_to_hz(_PCT_PER_STEP, hz) for a, hz in nominal_hz.items()}
         self.addresses = range(1, 127 if address_format is AddressFormat.FORMAT_126 else 32)
         self._polls = PollCache(self._build_poll)
 
@@ -216,12 +232,15 @@ class FcCodec:
         if len(frame) < 3 or frame[2] != exchange.request[2]:
             raise UnexpectedReply("reply from another address", raw=frame)
         telegram = decode_telegram(frame, from_drive=True)
-        output_pct = decode_reference(telegram.pcd2)
-        status = decode_status(telegram.pcd1, output_pct)
+        mav = telegram.pcd2  # two's complement, 0x4000 = 100 % of nominal (§8.5)
+        output_hz = (mav - 0x10000 if mav & 0x8000 else mav) * self._hz_per_step.get(
+            exchange.address, _DEFAULT_HZ_PER_STEP
+        )
+        status = decode_status(telegram.pcd1, output_hz)
         if exchange.access is Access.NONE:
             if telegram.pke is not None:
                 raise UnexpectedReply("parameter reply to a process telegram", raw=frame)
-            return Reply(address=exchange.address, status=status, output_pct=output_pct)
+            return Reply(address=exchange.address, status=status, output_frequency_hz=output_hz)
         if telegram.pke is None or exchange.parameter is None:
             raise UnexpectedReply("process reply to a parameter telegram", raw=frame)
         ak = telegram.ak
@@ -230,7 +249,7 @@ class FcCodec:
             return Reply(
                 address=exchange.address,
                 status=status,
-                output_pct=output_pct,
+                output_frequency_hz=output_hz,
                 error=DriveError(code, error_text(code)),
             )
         if telegram.pnu != exchange.parameter.code:
@@ -248,7 +267,7 @@ class FcCodec:
         return Reply(
             address=exchange.address,
             status=status,
-            output_pct=output_pct,
+            output_frequency_hz=output_hz,
             value=value,
             conditions=conditions,
         )

@@ -29,8 +29,8 @@ class FcOptions:
 
 
 def _codec(options: FcOptions, nominal_hz: Mapping[int, float]) -> DriveCodec:
-    # FC telegrams carry the reference in % of the drive's own nominal: no table needed.
-    return FcCodec(AddressFormat(options.address_format))
+    # The main actual value is in % of each drive's nominal; replies carry Hz.
+    return FcCodec(AddressFormat(options.address_format), nominal_hz=dict(nominal_hz))
 
 
 SPEC: Final[ProtocolSpec[FcOptions]] = ProtocolSpec(

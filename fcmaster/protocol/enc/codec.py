@@ -35,7 +35,7 @@ from fcmaster.protocol.codec import (
     ParameterValue,
     Reply,
 )
-from fcmaster.protocol.drive import ControlIntent, Motion
+from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, Motion, pct_to_hz
 from fcmaster.protocol.enc.codes import (
     NumberEncoding,
     ResponseCode,
@@ -70,7 +70,6 @@ from fcmaster.protocol.enc.parameters import (
 )
 from fcmaster.protocol.polls import PollCache
 
-DEFAULT_NOMINAL_HZ: Final = 50.0
 MAX_FREQUENCY_HZ: Final = 0xFFFF / 100  # the data area holds 0.01 Hz steps (§4.2)
 REPLY_LENGTH: Final = LONG_LENGTH  # every reply has the data area (§3); frame errors are shorter
 DEFAULT_MONITOR: Final = tuple(
@@ -349,7 +348,7 @@ class EncCodec:
         return encode_number(address, self.address_encoding)
 
     def _frequency(self, address: int, reference_pct: float) -> int:
-        hz = reference_pct * self._nominal(address) / 100.0
+        hz = pct_to_hz(reference_pct, self._nominal(address))
         # Compared before rounding, so that NaN and infinities are refused too.
         if not 0 <= hz <= MAX_FREQUENCY_HZ:
             raise UsageError(f"{hz:g} Hz is beyond the {MAX_FREQUENCY_HZ:g} Hz a frame can carry")

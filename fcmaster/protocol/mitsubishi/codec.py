@@ -42,7 +42,7 @@ from fcmaster.protocol.codec import (
     ParameterValue,
     Reply,
 )
-from fcmaster.protocol.drive import ControlIntent, Motion
+from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, Motion, pct_to_hz
 from fcmaster.protocol.mitsubishi.error_codes import error_text, fault_pair, fault_text
 from fcmaster.protocol.mitsubishi.framer import MitsubishiFramer
 from fcmaster.protocol.mitsubishi.instructions import (
@@ -81,7 +81,6 @@ from fcmaster.protocol.mitsubishi.parameters import (
     resolve,
 )
 from fcmaster.protocol.mitsubishi.profile import (
-    DEFAULT_NOMINAL_HZ,
     decode_status,
     frequency_hz,
     frequency_raw,
@@ -217,7 +216,7 @@ class MitsubishiCodec:
         if intent.motion is not Motion.RUN:
             return (command,)
         nominal = self.nominal_hz.get(address, DEFAULT_NOMINAL_HZ)
-        raw = frequency_raw(intent.reference_pct * nominal / 100.0)
+        raw = frequency_raw(pct_to_hz(intent.reference_pct, nominal))
         code = SET_FREQUENCY_RAM.write or 0
         frequency = self._exchange(address, code, raw, SET_FREQUENCY_RAM.digits, control=True)
         return (frequency, command)

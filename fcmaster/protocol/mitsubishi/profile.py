@@ -54,7 +54,6 @@ class OperationMode(enum.IntEnum):
 
 FREQUENCY_STEP_HZ: Final = 0.01  # H6D/H6E/H6F and HED/HEE are in 0.01 Hz (§9)
 MAX_FREQUENCY_RAW: Final = 0xFFFF  # four digits; the drive's own limit (Pr.1/Pr.18) is lower
-DEFAULT_NOMINAL_HZ: Final = 50.0
 
 
 def run_command(intent: ControlIntent) -> int:

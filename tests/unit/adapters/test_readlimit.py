@@ -3,10 +3,11 @@ import asyncio
 import pytest
 
 from fcmaster.adapters.readlimit import ReadsBusy, ViewerReads
+from tests.fakes import FakeClock
 
 
 async def test_beyond_the_waiting_room_a_reader_is_told_to_come_back() -> None:
-    reads = ViewerReads(gap_s=0.0, max_waiting=1)
+    reads = ViewerReads(FakeClock(), gap_s=0.0, max_waiting=1)
     inside = asyncio.Event()
     leave = asyncio.Event()
 
@@ -26,3 +27,13 @@ async def test_beyond_the_waiting_room_a_reader_is_told_to_come_back() -> None:
         pass
     leave.set()
     await asyncio.gather(first, second)
+
+
+async def test_viewer_reads_on_a_line_are_spaced_by_the_gap_on_the_injected_clock() -> None:
+    clock = FakeClock(start=100.0)
+    reads = ViewerReads(clock, gap_s=0.5)
+    started: list[tuple[str, float]] = []
+    for line in ("line1", "line1", "line1", "line2"):
+        async with reads.turn(line):
+            started.append((line, clock.now()))
+    assert started == [("line1", 100.0), ("line1", 100.5), ("line1", 101.0), ("line2", 101.0)]

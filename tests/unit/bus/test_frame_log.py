@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import time
-
 from fcmaster.bus.frame_log import RX, TX, FrameLog
 from fcmaster.bus.plan import DrivePlan
-from tests.fakes import Timed
+from tests.fakes import FakeClock, Timed
 from tests.unit.bus.bench import bench
 from tests.unit.bus.fcdrive import FcDrive, FcLine
 
 
 def test_a_follower_gets_every_frame_once_in_order() -> None:
-    log = FrameLog(length=8)
+    log = FrameLog(FakeClock().wall, length=8)
     log.add(TX, b"\x02\x01", 1.0)
     log.add(RX, b"\x02\x81", 1.5)
     first = log.since(0)
@@ -29,15 +27,18 @@ def test_a_follower_gets_every_frame_once_in_order() -> None:
 
 
 def test_frames_carry_the_wall_clock_time_they_were_logged() -> None:
-    log = FrameLog()
-    before = time.time()
+    clock = FakeClock(start=5.0)
+    log = FrameLog(clock.wall)
+    before = clock.wall()
     log.add(TX, b"x", 5.0)
-    wall = log.since().frames[0][3]
-    assert before <= wall <= time.time()
+    clock.time = 6.0
+    log.add(RX, b"y", 6.0)
+    walls = [frame[3] for frame in log.since().frames]
+    assert walls == [before, before + 1.0]  # the clock's wall time when each was added
 
 
 def test_a_follower_that_fell_behind_the_ring_learns_how_many_it_missed() -> None:
-    log = FrameLog(length=4)
+    log = FrameLog(FakeClock().wall, length=4)
     for n in range(10):
         log.add(TX, bytes([n]), float(n))
     got = log.since(3)
@@ -47,7 +48,7 @@ def test_a_follower_that_fell_behind_the_ring_learns_how_many_it_missed() -> Non
 
 
 def test_numbers_from_before_a_restart_start_the_follower_afresh() -> None:
-    log = FrameLog()
+    log = FrameLog(FakeClock().wall)
     assert (log.since(50).frames, log.since(50).next) == ([], 0)
     log.add(RX, b"a", 0.0)
     got = log.since(50)

@@ -35,6 +35,7 @@ from fcmaster.protocol.codec import (
 )
 from fcmaster.protocol.danfoss_fc import ControlWord, Telegram, decode_telegram, encode_reference
 from fcmaster.protocol.danfoss_fc.codec import ALARM_WORD, WARNING_WORD, FcCodec
+from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, pct_to_hz
 
 A = DrivePlan(name="a", address=1, control=True)
 B = DrivePlan(name="b", address=2, control=True)
@@ -68,7 +69,10 @@ def reply(
         reverse=None if output_pct == 0 else output_pct < 0,
         accepts_bus_control=not local,
     )
-    return Reply(address=address, status=status, output_pct=output_pct, value=value, error=error)
+    output_hz = pct_to_hz(output_pct, DEFAULT_NOMINAL_HZ)  # the planner's drives are at 50 Hz
+    return Reply(
+        address=address, status=status, output_frequency_hz=output_hz, value=value, error=error
+    )
 
 
 def telegram(step: Step) -> Telegram:

@@ -212,7 +212,7 @@ def test_codec_control_intents_drive_the_simulated_drive(clock: FakeClock) -> No
     reply = codec.parse(stop, transact(line, clock, stop.request))
     assert reply.status is not None
     assert reply.status.running
-    assert reply.output_pct == pytest.approx(50.0, abs=1.0)
+    assert reply.output_frequency_hz == pytest.approx(25.0, abs=0.5)  # 50 % of 50 Hz
     clock.time += 5.0
     reply = codec.parse(stop, transact(line, clock, stop.request))
     assert reply.status is not None
