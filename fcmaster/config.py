@@ -39,9 +39,12 @@ from pydantic import (
 
 from fcmaster.adapters.auth import listen_problem
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
-from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart, WatchdogPlan
+from fcmaster.bus.poll_round import poll_round_s
+from fcmaster.bus.watchdog import WATCHDOGS
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.protocol.codec import DriveCodec
+from fcmaster.protocol.watchdog import check_timeout
 
 # Port URLs the master can drive: the simulator, serial device servers (raw TCP, RFC 2217)
 # and pyserial's local helpers; anything else would fail only when the line first opens.
@@ -52,6 +55,13 @@ _ENV = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)(?::-([^}]*))?\}")
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class WatchdogModel(_Model):
+    """A drive's ``watchdog``: the communication watchdog fcmaster gives it at adoption."""
+
+    timeout_s: float
+    action: str | None = None  # None: the protocol's first action (FC: stop; others: trip)
 
 
 class DriveModel(_Model):
@@ -68,6 +78,7 @@ class DriveModel(_Model):
     modbus_unit: int | None = Field(default=None, ge=1, le=247)  # None: the bus address
     # seconds the status may take to show a start's or stop's result (None: a default)
     confirm_s: float | None = Field(default=None, gt=0, le=600)
+    watchdog: WatchdogModel | None = None
 
 
 class BusModel(_Model):
@@ -471,6 +482,7 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                     min_frequency_hz=drive.min_frequency_hz,
                     max_frequency_hz=max_hz,
                     confirm_s=drive.confirm_s,
+                    watchdog=_watchdog(bus, drive, at, problems),
                 )
             )
         if bus.protocol != "danfoss-fc" and "address_format" in bus.model_fields_set:
@@ -481,7 +493,9 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
         for key in ("terminator", "wait_time_ms"):
             if bus.protocol != "mitsubishi" and key in bus.model_fields_set:
                 problems.append((f"{where}.{key}", "only mitsubishi lines have one"))
-        lines.append(_line(bus, tuple(drives)))
+        line = _line(bus, tuple(drives))
+        _watchdogs_outlast_round(line, where, problems)
+        lines.append(line)
     # Names are HTTP path segments (/api/v1/drives/{name}) and MQTT topic levels
     # ({base}/{bus}/{drive}/state) whichever surfaces are on today: a name must work on all.
     for b, bus in enumerate(model.buses):
@@ -605,6 +619,55 @@ def _line(bus: BusModel, drives: tuple[DrivePlan, ...]) -> LinePlan:
     # Where the protocol says how long its drives may take (Mitsubishi: the waiting time
     # plus the data check), the reply deadline is derived from it.
     return with_protocol_delay(plan)
+
+
+def _watchdog(
+    bus: BusModel, drive: DriveModel, at: str, problems: list[tuple[str, str]]
+) -> WatchdogPlan | None:
+    """The drive's ``watchdog`` as a plan; its problems, each at its key, into ``problems``."""
+    wanted = drive.watchdog
+    if wanted is None:
+        return None
+    facts = WATCHDOGS[bus.protocol]
+    action = wanted.action or facts.actions[0]
+    found = len(problems)
+    if drive.control != "bus":
+        problems.append(
+            (f"{at}.watchdog", "fcmaster writes the watchdog only of a `control: bus` drive")
+        )
+    if action not in facts.actions:
+        problems.append(
+            (
+                f"{at}.watchdog.action",
+                f"{action!r} is not an action of {bus.protocol} drives' watchdog "
+                f"(one of: {', '.join(facts.actions)})",
+            )
+        )
+    else:
+        try:
+            check_timeout(facts, wanted.timeout_s, action)
+        except UsageError as exc:
+            problems.append((f"{at}.watchdog.timeout_s", str(exc)))
+    return WatchdogPlan(wanted.timeout_s, action) if len(problems) == found else None
+
+
+def _watchdogs_outlast_round(line: LinePlan, where: str, problems: list[tuple[str, str]]) -> None:
+    """A configured watchdog shorter than the line's worst-case poll round would trip."""
+    if not any(drive.watchdog for drive in line.drives):
+        return
+    try:
+        round_s = poll_round_s(line)[0]
+    except UsageError:  # a monitor list the drive loop has already reported
+        return
+    for d, drive in enumerate(line.drives):
+        if drive.watchdog is not None and drive.watchdog.timeout_s < round_s:
+            problems.append(
+                (
+                    f"{where}.drives[{d}].watchdog.timeout_s",
+                    f"{drive.watchdog.timeout_s:g} s is shorter than the line's worst-case "
+                    f"poll round of {round_s * 1000:.1f} ms: normal polling would trip the drive",
+                )
+            )
 
 
 def _port_problem(port: str) -> str:

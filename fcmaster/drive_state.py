@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
+from fcmaster.bus.watchdog import WatchdogReport
 from fcmaster.protocol.codec import Condition
 from fcmaster.protocol.danfoss_fc import StatusWord
 from fcmaster.protocol.enc import StateWord
@@ -75,6 +76,9 @@ class DriveState:
     alarms: tuple[Condition, ...] = ()
     warnings: tuple[Condition, ...] = ()
     updated_at: float | None = None  # wall-clock seconds of the last good reply
+    # control: bus drives: their own communication watchdog as last read and judged (None
+    # until the watchdog audit first reports, soon after the drive is first adopted)
+    watchdog: WatchdogReport | None = None
 
     @property
     def key(self) -> str:
@@ -91,7 +95,7 @@ class DriveState:
 
     def to_json(self) -> dict[str, Any]:
         """The public JSON shape shown on every surface."""
-        return {
+        out: dict[str, Any] = {
             "name": self.name,
             "bus": self.bus,
             "address": self.address,
@@ -113,6 +117,9 @@ class DriveState:
             "warnings": [{"code": c.code, "text": c.text} for c in self.warnings],
             "updated_at": rfc3339(self.updated_at),
         }
+        if self.watchdog is not None:
+            out["watchdog"] = self.watchdog.to_json()
+        return out
 
 
 def rfc3339(wall: float | None) -> str | None:

@@ -44,6 +44,7 @@ from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.bus.transport import Transport
+from fcmaster.bus.watchdog import WatchdogAudit
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import Config
 from fcmaster.hub import Hub
@@ -208,14 +209,19 @@ class Service:
         try:
             async with AsyncExitStack() as stack:
                 for plan in self.config.lines:
+                    # Each commanded drive's own watchdog is read and judged when it comes
+                    # online (fcmaster.bus.watchdog).
+                    audit = WatchdogAudit(plan, report=self.fleet.drive_watchdog)
                     master = BusMaster(
                         plan,
                         codec=codec_for(plan),
                         transport=self._transport_factory(plan),
                         clock=self.clock,
-                        observer=self.fleet,
+                        observer=audit.observing(self.fleet),
                     )
+                    audit.attach(master.execute)
                     self.masters[plan.name] = await stack.enter_async_context(master)
+                    stack.push_async_callback(audit.aclose)  # before its line closes
                     serial = self._serial_ports.get(plan.name)
                     if serial is not None and serial.in_use is not None:
                         # Another fcmaster (or a tool) runs this line: a second master would
