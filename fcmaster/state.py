@@ -472,13 +472,17 @@ class FleetState:
         self._publish(key, new, drive.nominal_frequency_hz)
 
     def drive_watchdog(self, bus: str, name: str, report: WatchdogReport) -> None:
-        """A drive's communication watchdog was read and judged (the watchdog audit)."""
+        """A drive's communication watchdog was read and judged (the watchdog audit).
+
+        Readers see it at once; subscribers with the drive's next publication (its next
+        change, or the heartbeat within ``heartbeat_s``), listed in its ``changed``: the
+        verdicts come in a burst after adoption, and an audit result is not worth a
+        publication of its own. The log has the warning at once.
+        """
         key = f"{bus}/{name}"
         old = self._current(key)
-        if old.watchdog == report:
-            return
-        self._states[key] = new = dataclasses.replace(old, watchdog=report)
-        self._publish(key, new, self._plans[key].nominal_frequency_hz)
+        if old.watchdog != report:
+            self._states[key] = dataclasses.replace(old, watchdog=report)
 
     def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
         """A line opened or was lost."""

@@ -426,6 +426,11 @@ class BusMaster:
         for completion in completions:
             result = completion.result
             command = completion.command
+            if command.internal and command.action is Action.READ:
+                for ticket in completion.tickets:  # housekeeping: no audit line, no event
+                    if isinstance(ticket, asyncio.Future) and not ticket.done():
+                        ticket.set_result(result)
+                continue
             self._log.info(
                 "command.completed",
                 actor=command.actor or "-",

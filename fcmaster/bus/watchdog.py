@@ -18,7 +18,9 @@ worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
 * ``unknown`` — the reads failed, or the setting's effect cannot be told (FC's set-up
   switch).
 
-``off`` and ``too_short`` are logged as warnings with the fix in words. A drive configured
+The reads are the gateway's own housekeeping, like the ramp reads, so they make no audit
+line; the verdict's log line carries what they read. ``off`` and ``too_short`` are logged
+as warnings with the fix in words. A drive configured
 with ``watchdog: {timeout_s, action}`` whose setting differs is written (timeout first)
 and read back; the verdict is always that of what the drive reports, never of what was
 asked. A drive that already has the setting is not written, so a gateway that restarts
@@ -198,7 +200,7 @@ class WatchdogAudit:
         assert self._execute is not None
         values: list[float] = []
         for parameter in facts.parameters:
-            command = Command(action=Action.READ, parameter=parameter, actor=ACTOR)
+            command = Command(action=Action.READ, parameter=parameter, actor=ACTOR, internal=True)
             result = await self._execute(drive.name, command)
             if result.outcome is Outcome.CANCELLED:
                 return None, None

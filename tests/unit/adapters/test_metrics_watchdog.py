@@ -50,21 +50,33 @@ def test_drive_state_json_carries_the_watchdog_once_it_is_read() -> None:
     assert read["watchdog"] == {"timeout_s": 0.1, "action": "stop", "verdict": "too_short"}
 
 
-def test_a_new_verdict_is_published_once_and_an_unchanged_one_not_again() -> None:
+def test_a_new_verdict_is_read_at_once_and_published_with_the_next_heartbeat() -> None:
     from fcmaster.bus.plan import DrivePlan, LinePlan
-    from fcmaster.state import DriveUpdated, Event, FleetState
+    from fcmaster.protocol.codec import DriveStatus, Reply
+    from fcmaster.state import HEARTBEAT_S, DriveUpdated, Event, FleetState
     from tests.fakes import FakeClock
 
-    line = LinePlan(name="line1", port="x", drives=(DrivePlan(name="a", address=1, control=True),))
+    drive = DrivePlan(name="a", address=1, control=True)
+    line = LinePlan(name="line1", port="x", drives=(drive,))
     events: list[Event] = []
-    fleet = FleetState((line,), emit=events.append, clock=FakeClock(), wall=lambda: 0.0)
+    clock = FakeClock()
+    fleet = FleetState((line,), emit=events.append, clock=clock, wall=lambda: 0.0)
+    status = DriveStatus(word=0x0607, running=False, fault=False, warning=False,
+                         at_reference=False, reverse=None)  # fmt: skip
+    fleet.drive_replied("line1", drive, Reply(address=1, status=status), clock.now(), None)
+    events.clear()
     report = WatchdogReport(None, "off", Verdict.OFF)
     fleet.drive_watchdog("line1", "a", report)
-    fleet.drive_watchdog("line1", "a", WatchdogReport(None, "off", Verdict.OFF))
-    updates = [e for e in events if isinstance(e, DriveUpdated)]
-    assert len(updates) == 1
-    assert updates[0].changed == ("watchdog",)
-    assert updates[0].state.watchdog == report
     state = fleet.get("line1", "a")
     assert state is not None
-    assert state.to_json()["watchdog"]["verdict"] == "off"
+    assert state.to_json()["watchdog"]["verdict"] == "off"  # readers: at once
+    assert not [e for e in events if isinstance(e, DriveUpdated)]
+    clock.time += 1.0
+    fleet.drive_replied("line1", drive, Reply(address=1, status=status), clock.now(), None)
+    assert not [e for e in events if isinstance(e, DriveUpdated)]  # no change of its own
+    clock.time += HEARTBEAT_S
+    fleet.drive_replied("line1", drive, Reply(address=1, status=status), clock.now(), None)
+    fleet.drive_watchdog("line1", "a", WatchdogReport(None, "off", Verdict.OFF))
+    updates = [e for e in events if isinstance(e, DriveUpdated)]
+    assert [u.changed for u in updates] == [("watchdog",)]
+    assert updates[0].state.watchdog == report

@@ -115,6 +115,9 @@ async def test_watchdog_is_read_once_the_drive_is_adopted_and_judged_off() -> No
     assert warning["drive"] == "a"
     assert "8-04" in warning["fix"]
     assert "[2] Stop" in warning["fix"]
+    # the reads are housekeeping: no audit line and no command event, unlike a caller's
+    assert [e for e in logs if e["event"] == "command.completed"] == []
+    assert b.observer.results == []
 
 
 async def test_a_stop_with_a_timeout_longer_than_the_round_is_ok() -> None:
@@ -231,6 +234,16 @@ async def test_configured_watchdog_is_written_time_first_and_read_back() -> None
     assert (fc.parameters[TIME], fc.parameters[FUNCTION]) == (30, 2)
     assert reports == [("a", WatchdogReport(3.0, "stop", Verdict.OK))]
     assert any(e["event"] == "drive.watchdog_written" for e in logs)
+    # the writes change the drive: each is audited as a command
+    audited = [
+        (e["actor"], e["command"], e["parameter"], e["value"], e["outcome"])
+        for e in logs
+        if e["event"] == "command.completed"
+    ]
+    assert audited == [
+        ("watchdog-audit", "write", "8-03", 3.0, "done"),
+        ("watchdog-audit", "write", "8-04", 2, "done"),
+    ]
     assert not any(e["event"] == "drive.watchdog_off" for e in logs)
 
 
