@@ -211,7 +211,7 @@ class Service:
                 for plan in self.config.lines:
                     # Each commanded drive's own watchdog is read and judged when it comes
                     # online (fcmaster.bus.watchdog).
-                    audit = WatchdogAudit(plan, report=self.fleet.drive_watchdog)
+                    audit = WatchdogAudit(plan, clock=self.clock, report=self.fleet.drive_watchdog)
                     master = BusMaster(
                         plan,
                         codec=codec_for(plan),

@@ -18,13 +18,17 @@ worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
 * ``unknown`` — the reads failed, or the setting's effect cannot be told (FC's set-up
   switch).
 
-The reads are the gateway's own housekeeping, like the ramp reads, so they make no audit
-line; the verdict's log line carries what they read. ``off`` and ``too_short`` are logged
-as warnings with the fix in words. A drive configured
-with ``watchdog: {timeout_s, action}`` whose setting differs is written (timeout first)
-and read back; the verdict is always that of what the drive reports, never of what was
-asked. A drive that already has the setting is not written, so a gateway that restarts
-often does not wear the drive's memory.
+The audit's exchanges go through the queue one at a time for the whole line, and each is
+followed by a rest nine times as long as it took (``AUDIT_SHARE``), so the audit takes at
+most a tenth of the line's time however many drives come online together: a line of 126
+drives coming up is audited over a minute or so, while every drive keeps being polled
+(and its watchdog fed) at nearly its full rate. The reads are the gateway's own
+housekeeping, like the ramp reads, so they make no audit line; the verdict's log line
+carries what they read. ``off`` and ``too_short`` are logged as warnings with the fix in
+words. A drive configured with ``watchdog: {timeout_s, action}`` whose setting differs is
+written (timeout first) and read back; the verdict is always that of what the drive
+reports, never of what was asked. A drive that already has the setting is not written, so
+a gateway that restarts often does not wear the drive's memory.
 
 The vendor facts live in each protocol package's ``watchdog`` module; :data:`WATCHDOGS` is
 the one place that picks them by protocol id.
@@ -46,6 +50,7 @@ from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.master import BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, WatchdogPlan
 from fcmaster.bus.poll_round import poll_round_s
+from fcmaster.clock import Clock
 from fcmaster.protocol.danfoss_fc.watchdog import WATCHDOG as FC_WATCHDOG
 from fcmaster.protocol.enc.watchdog import WATCHDOG as ENC_WATCHDOG
 from fcmaster.protocol.mitsubishi.watchdog import WATCHDOG as MITSUBISHI_WATCHDOG
@@ -73,6 +78,8 @@ ACTOR: Final = "watchdog-audit"  # the audit line's actor for the reads and writ
 # polls of a drive: this many worst-case rounds, and never under a second.
 SUGGESTED_ROUNDS: Final = 4
 SUGGESTED_MIN_S: Final = 1.0
+AUDIT_SHARE: Final = 0.1  # the most of the line's time the audit's exchanges take
+AUDIT_REST_MAX_S: Final = 10.0  # the longest rest after one exchange (one that timed out)
 
 Execute = Callable[[str, Command], Awaitable[CommandResult]]
 
@@ -123,8 +130,16 @@ class WatchdogAudit:
     audit the line's command path once the BusMaster exists.
     """
 
-    def __init__(self, plan: LinePlan, *, report: Callable[[str, str, WatchdogReport], None]):
+    def __init__(
+        self,
+        plan: LinePlan,
+        *,
+        clock: Clock,
+        report: Callable[[str, str, WatchdogReport], None],
+    ) -> None:
         self.plan = plan
+        self._clock = clock
+        self._turn = asyncio.Lock()  # one audit exchange at a time on the line
         self.facts = WATCHDOGS.get(plan.protocol)
         self.round_s = poll_round_s(plan)[0] if plan.drives else 0.0
         self._report = report
@@ -193,15 +208,25 @@ class WatchdogAudit:
             return
         self._finish(drive, facts.decode(values), None)
 
+    async def _exchange(self, name: str, command: Command) -> CommandResult:
+        """Carry out ``command``, then rest, keeping the audit to its share of the line."""
+        assert self._execute is not None
+        async with self._turn:
+            started = self._clock.now()
+            result = await self._execute(name, command)
+            spent = self._clock.now() - started
+            rest = spent * (1.0 - AUDIT_SHARE) / AUDIT_SHARE
+            await self._clock.sleep(min(rest, AUDIT_REST_MAX_S))
+        return result
+
     async def _read(
         self, drive: DrivePlan, facts: WatchdogFacts
     ) -> tuple[list[float] | None, str | None]:
         """The watchdog parameters' values; else None and why (None too: line gone)."""
-        assert self._execute is not None
         values: list[float] = []
         for parameter in facts.parameters:
             command = Command(action=Action.READ, parameter=parameter, actor=ACTOR, internal=True)
-            result = await self._execute(drive.name, command)
+            result = await self._exchange(drive.name, command)
             if result.outcome is Outcome.CANCELLED:
                 return None, None
             value = result.value
@@ -218,12 +243,11 @@ class WatchdogAudit:
         self, drive: DrivePlan, wanted: WatchdogPlan, writes: tuple[tuple[str, float], ...]
     ) -> bool | None:
         """Write the configured setting; whether every write was done (None: line gone)."""
-        assert self._execute is not None
         for parameter, value in writes:
             command = Command(
                 action=Action.WRITE, parameter=parameter, value=value, persist=True, actor=ACTOR
             )
-            result = await self._execute(drive.name, command)
+            result = await self._exchange(drive.name, command)
             if result.outcome is Outcome.CANCELLED:
                 return None
             if result.outcome is not Outcome.DONE:

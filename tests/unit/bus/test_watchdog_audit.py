@@ -8,6 +8,7 @@ wrapped by a :class:`WatchdogAudit`. FC 8-03 travels as a Uint32 in 0.1 s (raw 6
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import random
 from typing import Any
 
@@ -47,7 +48,9 @@ def _bench(
     transport = ScriptedTransport(clock, responder or FcLine(*fc), delay_s=DELAY_S)
     observer = Recorder(transport=transport)
     reports: list[tuple[str, WatchdogReport]] = []
-    audit = WatchdogAudit(plan, report=lambda bus, name, report: reports.append((name, report)))
+    audit = WatchdogAudit(
+        plan, clock=clock, report=lambda bus, name, report: reports.append((name, report))
+    )
     master = BusMaster(
         plan,
         codec=FcCodec(),
@@ -103,7 +106,7 @@ async def test_watchdog_is_read_once_the_drive_is_adopted_and_judged_off() -> No
     b, reports, audit = _bench(a, fc=[_drive(1, 600, 0)])
     with structlog.testing.capture_logs() as logs:
         async with b.master:
-            await b.clock.run_until(T0 + 0.5)
+            await b.clock.run_until(T0 + 3.0)
             await audit.aclose()
     adopted = _first_reply_at(b, "a")
     accesses = _accesses(b, 1)
@@ -125,7 +128,7 @@ async def test_a_stop_with_a_timeout_longer_than_the_round_is_ok() -> None:
     b, reports, audit = _bench(a, fc=[_drive(1, 20, 2)])
     with structlog.testing.capture_logs() as logs:
         async with b.master:
-            await b.clock.run_until(T0 + 0.5)
+            await b.clock.run_until(T0 + 3.0)
             await audit.aclose()
     assert reports == [("a", WatchdogReport(2.0, "stop", Verdict.OK))]
     assert not [e for e in logs if e["log_level"] == "warning"]
@@ -141,7 +144,7 @@ async def test_a_timeout_shorter_than_the_worst_round_is_too_short() -> None:
     assert round_s > 0.1
     with structlog.testing.capture_logs() as logs:
         async with b.master:
-            await b.clock.run_until(T0 + 1.0)
+            await b.clock.run_until(T0 + 5.0)
             await audit.aclose()
     assert dict(reports) == {
         "a": WatchdogReport(0.1, "stop", Verdict.TOO_SHORT),
@@ -159,7 +162,7 @@ async def test_a_drive_whose_parameters_cannot_be_read_is_unknown() -> None:
     a = DrivePlan(name="a", address=1, control=True)
     b, reports, audit = _bench(a, fc=[FcDrive(1)])  # no 8-03/8-04: refused (AK 7)
     async with b.master:
-        await b.clock.run_until(T0 + 0.5)
+        await b.clock.run_until(T0 + 3.0)
         await audit.aclose()
     assert reports == [("a", WatchdogReport(None, "unknown", Verdict.UNKNOWN))]
 
@@ -168,7 +171,7 @@ async def test_a_monitor_only_drive_is_not_audited() -> None:
     m = DrivePlan(name="m", address=3)
     b, reports, audit = _bench(m, fc=[_drive(3, 600, 0)])
     async with b.master:
-        await b.clock.run_until(T0 + 0.5)
+        await b.clock.run_until(T0 + 3.0)
         await audit.aclose()
     assert _accesses(b, 3) == []
     assert reports == []
@@ -179,14 +182,14 @@ async def test_watchdog_is_read_again_when_the_drive_returns_online() -> None:
     fc = _drive(1, 20, 2)
     b, reports, audit = _bench(a, fc=[fc], probe_interval_s=0.5)
     async with b.master:
-        await b.clock.run_until(T0 + 0.3)
-        fc.silent = True
         await b.clock.run_until(T0 + 1.0)
+        fc.silent = True
+        await b.clock.run_until(T0 + 2.0)
         assert [name for name, online, _ in b.observer.availability] == ["a", "a"]
         fc.parameters[FUNCTION] = 0  # replaced meanwhile by a drive at factory settings
         fc.silent = False
         back = b.clock.now()
-        await b.clock.run_until(T0 + 2.5)
+        await b.clock.run_until(T0 + 4.0)
         await audit.aclose()
     reads = [(at, pnu) for at, kind, pnu, _ in _accesses(b, 1) if kind == "read"]
     assert [pnu for at, pnu in reads if at < back] == [TIME, FUNCTION]
@@ -201,11 +204,11 @@ async def test_watchdog_is_read_again_after_the_line_was_down() -> None:
     a = DrivePlan(name="a", address=1, control=True)
     b, reports, audit = _bench(a, fc=[_drive(1, 20, 2)])
     async with b.master:
-        await b.clock.run_until(T0 + 0.3)
+        await b.clock.run_until(T0 + 1.0)
         b.transport.lost = True
-        await b.clock.run_until(T0 + 0.4)
+        await b.clock.run_until(T0 + 1.1)
         b.transport.lost = False
-        await b.clock.run_until(T0 + 3.0)
+        await b.clock.run_until(T0 + 4.0)
         await audit.aclose()
     reads = [pnu for _, kind, pnu, _ in _accesses(b, 1) if kind == "read"]
     assert reads == [TIME, FUNCTION, TIME, FUNCTION]
@@ -221,7 +224,7 @@ async def test_configured_watchdog_is_written_time_first_and_read_back() -> None
     b, reports, audit = _bench(a, fc=[fc])
     with structlog.testing.capture_logs() as logs:
         async with b.master:
-            await b.clock.run_until(T0 + 0.5)
+            await b.clock.run_until(T0 + 3.0)
             await audit.aclose()
     assert [(kind, pnu, pwe) for _, kind, pnu, pwe in _accesses(b, 1)] == [
         ("read", TIME, 0),
@@ -251,7 +254,7 @@ async def test_configured_watchdog_already_in_the_drive_is_not_written_again() -
     a = DrivePlan(name="a", address=1, control=True, watchdog=WatchdogPlan(3.0, "trip"))
     b, reports, audit = _bench(a, fc=[_drive(1, 30, 5)])
     async with b.master:
-        await b.clock.run_until(T0 + 0.5)
+        await b.clock.run_until(T0 + 3.0)
         await audit.aclose()
     assert [kind for _, kind, _, _ in _accesses(b, 1)] == ["read", "read"]
     assert reports == [("a", WatchdogReport(3.0, "stop and trip", Verdict.OK))]
@@ -272,7 +275,7 @@ async def test_a_refused_write_leaves_the_verdict_to_what_the_drive_reads_back()
     b, reports, audit = _bench(a, fc=[fc], responder=refuse_function_writes)
     with structlog.testing.capture_logs() as logs:
         async with b.master:
-            await b.clock.run_until(T0 + 0.5)
+            await b.clock.run_until(T0 + 3.0)
             await audit.aclose()
     failed = next(e for e in logs if e["event"] == "drive.watchdog_write_failed")
     assert failed["param"] == "8-04"
@@ -280,3 +283,23 @@ async def test_a_refused_write_leaves_the_verdict_to_what_the_drive_reads_back()
     # 8-03 took 3.0 s, 8-04 stayed Off: the read-back says off, whatever was asked
     assert (fc.parameters[TIME], fc.parameters[FUNCTION]) == (30, 0)
     assert reports == [("a", WatchdogReport(None, "off", Verdict.OFF))]
+
+
+async def test_the_audit_of_a_whole_line_never_starves_the_polls() -> None:
+    plans = [DrivePlan(name=f"d{i}", address=i, control=True) for i in range(1, 9)]
+    b, reports, audit = _bench(*plans, fc=[_drive(i, 20, 2) for i in range(1, 9)])
+    async with b.master:
+        await b.clock.run_until(T0 + 12.0)
+        await audit.aclose()
+    assert len(reports) == 8  # every drive audited: 16 reads
+    round_s = poll_round_s(b.plan)[0]
+    one_exchange_s = round_s / 8
+    for address in range(1, 9):
+        times = [at for at, _ in b.requests(address)]
+        gaps = [later - earlier for earlier, later in itertools.pairwise(times)]
+        # Between two telegrams to a drive: one round of polls, and at most one audit read
+        # of another drive in it (the audit rests nine times as long as each exchange).
+        assert max(gaps) <= round_s + one_exchange_s + 1e-6, address
+    audit_reads = sorted(at for a in range(1, 9) for at, *_ in _accesses(b, a))
+    spacing = [later - earlier for earlier, later in itertools.pairwise(audit_reads)]
+    assert min(spacing) >= 9 * one_exchange_s * 0.9
