@@ -106,6 +106,7 @@ class Service:
         self.fleet = FleetState(config.lines, emit=self.hub.publish, clock=self.clock)
         self._transport_factory = transport_factory or self._default_transport
         self.masters: dict[str, BusMaster] = {}
+        self._audits: list[WatchdogAudit] = []  # one per line
         self._serial_ports: dict[str, SerialTransport] = {}  # by bus, for their adapters
         self._stopping = asyncio.Event()
         self._running_commands = 0
@@ -220,6 +221,7 @@ class Service:
                         observer=audit.observing(self.fleet),
                     )
                     audit.attach(master.execute)
+                    self._audits.append(audit)
                     self.masters[plan.name] = await stack.enter_async_context(master)
                     stack.push_async_callback(audit.aclose)  # before its line closes
                     serial = self._serial_ports.get(plan.name)
@@ -244,6 +246,8 @@ class Service:
                     stats.cancel()
                 log.info("service.stopping", on_shutdown=self.config.model.on_shutdown)
                 notify_systemd("STOPPING=1")
+                for audit in self._audits:
+                    audit.stop()  # no more watchdog reads or writes: only what on_shutdown asks
                 for master in self.masters.values():
                     master.cancel_queued(SHUTTING_DOWN)
                 if self.config.model.on_shutdown == "stop":

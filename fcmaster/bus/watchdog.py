@@ -145,6 +145,7 @@ class WatchdogAudit:
         self._report = report
         self._execute: Execute | None = None
         self._tasks: dict[str, asyncio.Task[None]] = {}
+        self._stopped = False
         self._log = log.bind(bus=plan.name)
 
     def attach(self, execute: Execute) -> None:
@@ -157,7 +158,7 @@ class WatchdogAudit:
 
     def drive_online(self, drive: DrivePlan) -> None:
         """``drive`` answers again: audit it (again), ending an audit still under way."""
-        if not drive.control or self._execute is None:
+        if not drive.control or self._execute is None or self._stopped:
             return
         running = self._tasks.pop(drive.name, None)
         if running is not None:
@@ -168,8 +169,15 @@ class WatchdogAudit:
         self._tasks[drive.name] = task
         task.add_done_callback(partial(self._done, drive.name))
 
+    def stop(self) -> None:
+        """Shutdown begins: nothing more goes out for the audit, whatever comes online."""
+        self._stopped = True
+        for task in self._tasks.values():
+            task.cancel()
+
     async def aclose(self) -> None:
         """End every audit under way (shutdown)."""
+        self._stopped = True
         tasks = list(self._tasks.values())
         self._tasks.clear()
         for task in tasks:

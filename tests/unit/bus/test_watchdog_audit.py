@@ -303,3 +303,15 @@ async def test_the_audit_of_a_whole_line_never_starves_the_polls() -> None:
     audit_reads = sorted(at for a in range(1, 9) for at, *_ in _accesses(b, a))
     spacing = [later - earlier for earlier, later in itertools.pairwise(audit_reads)]
     assert min(spacing) >= 9 * one_exchange_s * 0.9
+
+
+async def test_nothing_goes_out_for_the_audit_once_shutdown_began() -> None:
+    a = DrivePlan(name="a", address=1, control=True)
+    b, reports, audit = _bench(a, fc=[_drive(1, 20, 2)])
+    async with b.master:
+        audit.stop()  # as the service does when the shutdown begins
+        await b.clock.run_until(T0 + 3.0)
+        await audit.aclose()
+    assert b.observer.availability == [("a", True, b.observer.availability[0][2])]
+    assert _accesses(b, 1) == []
+    assert reports == []
