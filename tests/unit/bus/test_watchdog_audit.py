@@ -315,3 +315,13 @@ async def test_nothing_goes_out_for_the_audit_once_shutdown_began() -> None:
     assert b.observer.availability == [("a", True, b.observer.availability[0][2])]
     assert _accesses(b, 1) == []
     assert reports == []
+
+
+def test_replies_reach_the_inner_observer_without_a_call_of_the_audits_own() -> None:
+    recorder = Recorder()
+    plan = LinePlan(name="line1", port="x")
+    audit = WatchdogAudit(plan, clock=VirtualClock(T0), report=lambda *_: None)
+    observer = audit.observing(recorder)
+    # the hot path (every reply) is the inner observer's own bound method, not a wrapper
+    assert observer.drive_replied == recorder.drive_replied
+    assert observer.command_completed == recorder.command_completed
