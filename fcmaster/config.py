@@ -52,6 +52,7 @@ from fcmaster.config_sections import (
 )
 from fcmaster.config_sections import StrictModel as _Model
 from fcmaster.config_values import check_name, port_url_problem
+from fcmaster.config_watchdog import WatchdogModel, watchdog_plan, watchdogs_outlast_round
 from fcmaster.config_yaml import describe_error, substitute
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.protocol.registry import DEFAULT, NAMES, line_keys, spec_for
@@ -96,6 +97,7 @@ class DriveModel(_Model):
     modbus_unit: int | None = Field(default=None, ge=1, le=247)  # None: the bus address
     # seconds the status may take to show a start's or stop's result (None: a default)
     confirm_s: float | None = Field(default=None, gt=0, le=600)
+    watchdog: WatchdogModel | None = None
 
 
 class BusFields(_Model):
@@ -324,10 +326,15 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                     min_frequency_hz=drive.min_frequency_hz,
                     max_frequency_hz=max_hz,
                     confirm_s=drive.confirm_s,
+                    watchdog=watchdog_plan(
+                        bus.protocol, drive.watchdog, drive.control, at, problems
+                    ),
                 )
             )
         problems.extend(_foreign_keys(bus, where))
-        lines.append(_line(bus, tuple(drives)))
+        line = _line(bus, tuple(drives))
+        watchdogs_outlast_round(line, where, problems)
+        lines.append(line)
     # Names are HTTP path segments (/api/v1/drives/{name}) and MQTT topic levels
     # ({base}/{bus}/{drive}/state) whichever surfaces are on today: a name must work on all.
     for b, bus in enumerate(model.buses):

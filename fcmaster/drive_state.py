@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
+from fcmaster.bus.watchdog import WatchdogReport
 from fcmaster.protocol.codec import Condition
 from fcmaster.protocol.registry import PROTOCOLS
 
@@ -64,6 +65,9 @@ class DriveState:
     alarms: tuple[Condition, ...] = ()
     warnings: tuple[Condition, ...] = ()
     updated_at: float | None = None  # wall-clock seconds of the last good reply
+    # control: bus drives: their own communication watchdog as last read and judged (None
+    # until the watchdog audit first reports, soon after the drive is first adopted)
+    watchdog: WatchdogReport | None = None
 
     @property
     def key(self) -> str:
@@ -82,7 +86,7 @@ class DriveState:
 
     def to_json(self) -> dict[str, Any]:
         """The public JSON shape shown on every surface."""
-        return {
+        out: dict[str, Any] = {
             "name": self.name,
             "bus": self.bus,
             "address": self.address,
@@ -104,6 +108,9 @@ class DriveState:
             "warnings": [{"code": c.code, "text": c.text} for c in self.warnings],
             "updated_at": rfc3339(self.updated_at),
         }
+        if self.watchdog is not None:
+            out["watchdog"] = self.watchdog.to_json()
+        return out
 
 
 def rfc3339(wall: float | None) -> str | None:

@@ -44,6 +44,7 @@ from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.bus.transport import Transport
+from fcmaster.bus.watchdog import WatchdogAudit
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import Config
 from fcmaster.hub import Hub
@@ -105,6 +106,7 @@ class Service:
         self.fleet = FleetState(config.lines, emit=self.hub.publish, clock=self.clock)
         self._transport_factory = transport_factory or self._default_transport
         self.masters: dict[str, BusMaster] = {}
+        self._audits: list[WatchdogAudit] = []  # one per line
         self._serial_ports: dict[str, SerialTransport] = {}  # by bus, for their adapters
         self._stopping = asyncio.Event()
         self._running_commands = 0
@@ -208,14 +210,20 @@ class Service:
         try:
             async with AsyncExitStack() as stack:
                 for plan in self.config.lines:
+                    # Each commanded drive's own watchdog is read and judged when it comes
+                    # online (fcmaster.bus.watchdog).
+                    audit = WatchdogAudit(plan, clock=self.clock, report=self.fleet.drive_watchdog)
                     master = BusMaster(
                         plan,
                         codec=codec_for(plan),
                         transport=self._transport_factory(plan),
                         clock=self.clock,
-                        observer=self.fleet,
+                        observer=audit.observing(self.fleet),
                     )
+                    audit.attach(master.execute)
+                    self._audits.append(audit)
                     self.masters[plan.name] = await stack.enter_async_context(master)
+                    stack.push_async_callback(audit.aclose)  # before its line closes
                     serial = self._serial_ports.get(plan.name)
                     if serial is not None and serial.in_use is not None:
                         # Another fcmaster (or a tool) runs this line: a second master would
@@ -238,6 +246,8 @@ class Service:
                     stats.cancel()
                 log.info("service.stopping", on_shutdown=self.config.model.on_shutdown)
                 notify_systemd("STOPPING=1")
+                for audit in self._audits:
+                    audit.stop()  # no more watchdog reads or writes: only what on_shutdown asks
                 for master in self.masters.values():
                     master.cancel_queued(SHUTTING_DOWN)
                 if self.config.model.on_shutdown == "stop":

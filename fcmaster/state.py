@@ -40,6 +40,7 @@ from typing import Any
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.bus.watchdog import WatchdogReport
 from fcmaster.clock import Clock
 from fcmaster.drive_state import DriveState, Measured, rfc3339
 from fcmaster.errors import FcmasterError
@@ -68,7 +69,7 @@ DEADBAND_PCT = 0.1  # of the nominal frequency for the output, of the reading fo
 # Fields whose every change is published (the analog ones go by the deadband).
 _DISCRETE = (
     "online", "running", "fault", "warning", "direction", "at_reference", "status_word",
-    "reference_pct", "alarms", "warnings",
+    "reference_pct", "alarms", "warnings", "watchdog",
 )  # fmt: skip
 
 
@@ -461,6 +462,19 @@ class FleetState:
         self._states[key] = new
         self._emit(AvailabilityChanged(bus=new.bus, drive=new.name, online=online))
         self._publish(key, new, drive.nominal_frequency_hz)
+
+    def drive_watchdog(self, bus: str, name: str, report: WatchdogReport) -> None:
+        """A drive's communication watchdog was read and judged (the watchdog audit).
+
+        Readers see it at once; subscribers with the drive's next publication (its next
+        change, or the heartbeat within ``heartbeat_s``), listed in its ``changed``: the
+        verdicts come in a burst after adoption, and an audit result is not worth a
+        publication of its own. The log has the warning at once.
+        """
+        key = f"{bus}/{name}"
+        old = self._current(key)
+        if old.watchdog != report:
+            self._states[key] = dataclasses.replace(old, watchdog=report)
 
     def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
         """A line opened or was lost."""

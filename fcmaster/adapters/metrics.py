@@ -16,7 +16,11 @@ writes it and ``unit``), ``fcmaster_drive_alarms`` and ``fcmaster_drive_warnings
 many are active), ``fcmaster_drive_alarm_active`` and ``fcmaster_drive_warning_active``
 (1 per active ``code``, with its ``text``); from the line statistics
 ``fcmaster_drive_requests_total``, ``_replies_total``, ``_timeouts_total``,
-``_refused_total`` and ``fcmaster_drive_last_latency_seconds``.
+``_refused_total`` and ``fcmaster_drive_last_latency_seconds``. ``control: bus`` drives also
+have ``fcmaster_drive_watchdog_verdict`` (one sample per ``verdict``: ok, off, too_short,
+unknown; 1 for the drive's present verdict, 0 for the others, so an alert is
+``fcmaster_drive_watchdog_verdict{verdict="off"} == 1``) and, when the drive's watchdog
+has a timeout, ``fcmaster_drive_watchdog_timeout_seconds``.
 
 Line metrics (label ``bus``): ``fcmaster_bus_info`` (``port``, ``protocol``,
 ``baudrate``), ``fcmaster_bus_up``, ``fcmaster_bus_utilisation_ratio``, counters
@@ -36,6 +40,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any, Final
 
 from fcmaster.adapters.gateway import LineInfo
+from fcmaster.bus.watchdog import Verdict
 from fcmaster.hub import Hub
 from fcmaster.state import DriveState
 
@@ -219,6 +224,31 @@ def _drive(x: Exposition, state: DriveState) -> None:
                 1,
                 labels({"code": condition.code, "text": condition.text}, base),
             )
+
+    if state.watchdog is not None:
+        _watchdog(x, state, base)
+
+
+def _watchdog(x: Exposition, state: DriveState, base: str) -> None:
+    watchdog = state.watchdog
+    assert watchdog is not None
+    for verdict in Verdict:
+        x.add(
+            "fcmaster_drive_watchdog_verdict",
+            "gauge",
+            "The verdict on the drive's own communication watchdog (1 for the present one): "
+            "off = the motor keeps running if the gateway dies, too_short = polling trips it.",
+            int(watchdog.verdict is verdict),
+            labels({"verdict": verdict.value}, base),
+        )
+    if watchdog.timeout_s is not None:
+        x.add(
+            "fcmaster_drive_watchdog_timeout_seconds",
+            "gauge",
+            "The drive's communication watchdog timeout, as read from the drive.",
+            watchdog.timeout_s,
+            base,
+        )
 
 
 def _line(x: Exposition, line: LineInfo) -> None:

@@ -124,6 +124,9 @@ class Command:
     value: float | str | None = None  # write
     persist: bool = False  # write to non-volatile memory too
     actor: str = ""  # who asked (token name, "cli", "mqtt:client-id"), for the log
+    # The gateway's own housekeeping read (the watchdog audit): its result goes to the one
+    # who asked, without an audit line or a command event. Honoured for reads only.
+    internal: bool = False
 
 
 def describe(command: Command) -> str:

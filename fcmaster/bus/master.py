@@ -39,7 +39,7 @@ from typing import Protocol
 
 import structlog
 
-from fcmaster.bus.commands import Command, CommandResult, Outcome
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.frame_log import FrameLog
 from fcmaster.bus.link import Link
 from fcmaster.bus.plan import DrivePlan, LinePlan
@@ -422,6 +422,11 @@ class BusMaster:
         for completion in completions:
             result = completion.result
             command = completion.command
+            if command.internal and command.action is Action.READ:
+                for ticket in completion.tickets:  # housekeeping: no audit line, no event
+                    if isinstance(ticket, asyncio.Future) and not ticket.done():
+                        ticket.set_result(result)
+                continue
             self._log.info(
                 "command.completed",
                 actor=command.actor or "-",

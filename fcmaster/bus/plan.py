@@ -20,6 +20,14 @@ class OnStart(enum.StrEnum):
     STOP = "stop"  # command a stop from the first telegram
 
 
+@dataclass(slots=True, frozen=True)
+class WatchdogPlan:
+    """The communication watchdog a drive is to be given at adoption (config ``watchdog``)."""
+
+    timeout_s: float
+    action: str  # one of the protocol's actions ("stop", "trip")
+
+
 @dataclass(slots=True, frozen=True, kw_only=True)
 class DrivePlan:
     """One drive on a line."""
@@ -34,6 +42,7 @@ class DrivePlan:
     max_frequency_hz: float = 50.0
     # how long the status may take to show a start's or stop's result (None: a default)
     confirm_s: float | None = None
+    watchdog: WatchdogPlan | None = None  # None: read and judged, never written
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)

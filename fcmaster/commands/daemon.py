@@ -14,35 +14,12 @@ from fcmaster import logsetup
 from fcmaster.bus.adapter import Machine
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import LinePlan
+from fcmaster.bus.poll_round import poll_round_s
 from fcmaster.bus.rotation import probe_period_s
 from fcmaster.commands.ports import unstable_ports
 from fcmaster.errors import ConfigError, UsageError
 
 log = structlog.get_logger("fcmaster.cli")
-
-
-def poll_round_s(plan: LinePlan) -> tuple[float, float]:
-    """Worst-case seconds for one poll of every drive, and for a full monitor refresh.
-
-    Every drive is assumed to answer, each after the line's response delay.
-    """
-    codec = codec_for(plan)
-    pause = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
-    one_round = full_refresh = 0.0
-    for drive in plan.drives:
-        monitor = (
-            codec.default_monitor()
-            if drive.monitor is None
-            else tuple(codec.parameter(p) for p in drive.monitor)
-        )
-        times = []
-        for read in codec.poll_sequence(monitor):
-            exchange = codec.poll(drive.address, None, read)
-            wire = plan.wire_s(len(exchange.request) + exchange.reply_length)
-            times.append(wire + plan.response_delay_s + pause)
-        one_round += max(times)
-        full_refresh += sum(times)
-    return one_round, full_refresh
 
 
 def longest_probe_wait_s(plan: LinePlan) -> float:

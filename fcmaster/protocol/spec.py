@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from fcmaster.protocol.codec import DriveCodec, ParameterKey
+from fcmaster.protocol.watchdog import WatchdogFacts
 
 OptionsT = TypeVar("OptionsT")
 
@@ -137,9 +138,8 @@ class ProtocolSpec(Generic[OptionsT]):
     diagnosis: DiagnosisParameters
     simulator: str  # "module:attribute" of its SimProtocol in the sim layer (see above)
     link_type: int  # its pcapng link type in captures (a private USER type, 147-162)
-    # The drive's communication watchdog facts (timeout and action parameters); None until
-    # the vendor's package provides them.
-    watchdog: object | None = None
+    # The drive's communication watchdog: its parameters, their values, what counts as off
+    watchdog: WatchdogFacts
 
     def options_of(self, source: object = None) -> OptionsT:
         """This protocol's options as ``source`` has them.

@@ -12,6 +12,7 @@ from fcmaster.protocol.danfoss_fc.codec import FcCodec
 from fcmaster.protocol.danfoss_fc.describe import describe_telegram
 from fcmaster.protocol.danfoss_fc.profile import StatusWord
 from fcmaster.protocol.danfoss_fc.telegram import AddressFormat
+from fcmaster.protocol.danfoss_fc.watchdog import WATCHDOG
 from fcmaster.protocol.spec import (
     DiagnosisParameters,
     LineKey,
@@ -67,4 +68,5 @@ SPEC: Final[ProtocolSpec[FcOptions]] = ProtocolSpec(
     ),
     link_type=147,  # pcapng USER0
     simulator="fcmaster.sim.danfoss_fc.simulator:SIMULATOR",
+    watchdog=WATCHDOG,
 )

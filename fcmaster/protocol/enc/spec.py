@@ -12,6 +12,7 @@ from fcmaster.protocol.enc.codec import EncCodec
 from fcmaster.protocol.enc.describe import describe_frame
 from fcmaster.protocol.enc.frame import BROADCAST
 from fcmaster.protocol.enc.parameters import StateWord
+from fcmaster.protocol.enc.watchdog import WATCHDOG
 from fcmaster.protocol.mitsubishi.notation import parse_ascii_frame
 from fcmaster.protocol.spec import (
     DiagnosisParameters,
@@ -92,4 +93,5 @@ SPEC: Final[ProtocolSpec[EncOptions]] = ProtocolSpec(
     ),
     link_type=149,  # pcapng USER2
     simulator="fcmaster.sim.enc.simulator:SIMULATOR",
+    watchdog=WATCHDOG,
 )

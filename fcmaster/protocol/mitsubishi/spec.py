@@ -12,6 +12,7 @@ from fcmaster.protocol.mitsubishi.codec import MitsubishiCodec, answer_delay_s
 from fcmaster.protocol.mitsubishi.describe import describe_frame
 from fcmaster.protocol.mitsubishi.notation import parse_ascii_frame
 from fcmaster.protocol.mitsubishi.profile import StatusBits
+from fcmaster.protocol.mitsubishi.watchdog import WATCHDOG
 from fcmaster.protocol.spec import (
     DiagnosisParameters,
     LineKey,
@@ -98,4 +99,5 @@ SPEC: Final[ProtocolSpec[MitsubishiOptions]] = ProtocolSpec(
     ),
     link_type=148,  # pcapng USER1
     simulator="fcmaster.sim.mitsubishi.simulator:SIMULATOR",
+    watchdog=WATCHDOG,
 )

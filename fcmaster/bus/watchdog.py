@@ -1,0 +1,351 @@
+"""The watchdog audit: whether each commanded drive stops by itself if the gateway dies.
+
+Theory of operation
+-------------------
+A ``control: bus`` drive is fed a control word in every exchange, so its own communication
+watchdog (FC 8-03/8-04, Mitsubishi Pr.122, ENC F2.16) is what stops the motor when the
+gateway dies. Each time such a drive comes online (first adoption, after a demotion, after
+the line was down: it may have been replaced meanwhile), :class:`WatchdogAudit` reads those
+parameters through the line's ordinary command queue — reads like any other, served
+between polls, so polling keeps its pace — and judges the setting against the line's
+worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
+
+* ``ok`` — the drive stops (ramp or trip) once it hears nothing for longer than a round;
+* ``off`` — it keeps running if the gateway dies (watchdog off, or an action such as
+  FC's freeze output that leaves the motor turning);
+* ``too_short`` — the timeout is shorter than a round, so normal polling trips it
+  (Mitsubishi Pr.122 = 0 counts so: it trips as soon as the link commands);
+* ``unknown`` — the reads failed, or the setting's effect cannot be told (FC's set-up
+  switch).
+
+The audit's exchanges go through the queue one at a time for the whole line, and each is
+followed by a rest nine times as long as it took (``AUDIT_SHARE``), so the audit takes at
+most a tenth of the line's time however many drives come online together: a line of 126
+drives coming up is audited over a minute or so, while every drive keeps being polled
+(and its watchdog fed) at nearly its full rate. The reads are the gateway's own
+housekeeping, like the ramp reads, so they make no audit line; the verdict's log line
+carries what they read. ``off`` and ``too_short`` are logged as warnings with the fix in
+words. A drive configured with ``watchdog: {timeout_s, action}`` whose setting differs is
+written (timeout first) and read back; the verdict is always that of what the drive
+reports, never of what was asked. A drive that already has the setting is not written, so
+a gateway that restarts often does not wear the drive's memory.
+
+The vendor facts live in each protocol package's ``watchdog`` module, and reach the audit
+through the protocol's spec (``ProtocolSpec.watchdog``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import math
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, Final
+
+import structlog
+
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.master import BusObserver
+from fcmaster.bus.plan import DrivePlan, LinePlan, WatchdogPlan
+from fcmaster.bus.poll_round import poll_round_s
+from fcmaster.clock import Clock
+from fcmaster.protocol.registry import spec_for
+from fcmaster.protocol.watchdog import WatchdogFacts, WatchdogSetting
+
+__all__ = [
+    "Verdict",
+    "WatchdogAudit",
+    "WatchdogReport",
+    "judge",
+    "suggested_timeout_s",
+]
+
+log = structlog.get_logger("fcmaster.bus")
+
+ACTOR: Final = "watchdog-audit"  # the audit line's actor for the reads and writes
+# A timeout worth suggesting leaves room for retries, commands and probes between two
+# polls of a drive: this many worst-case rounds, and never under a second.
+SUGGESTED_ROUNDS: Final = 4
+SUGGESTED_MIN_S: Final = 1.0
+AUDIT_SHARE: Final = 0.1  # the most of the line's time the audit's exchanges take
+AUDIT_REST_MAX_S: Final = 10.0  # the longest rest after one exchange (one that timed out)
+
+Execute = Callable[[str, Command], Awaitable[CommandResult]]
+
+
+class Verdict(enum.StrEnum):
+    """What a drive's watchdog does for a dead gateway (DESIGN.md "Drive state")."""
+
+    OK = "ok"
+    OFF = "off"
+    TOO_SHORT = "too_short"
+    UNKNOWN = "unknown"
+
+
+@dataclass(slots=True, frozen=True)
+class WatchdogReport:
+    """A drive's watchdog as last read, and the verdict on it."""
+
+    timeout_s: float | None
+    action: str
+    verdict: Verdict
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"timeout_s", "action", "verdict"}``."""
+        return {"timeout_s": self.timeout_s, "action": self.action, "verdict": self.verdict.value}
+
+
+def judge(setting: WatchdogSetting, round_s: float) -> Verdict:
+    """The verdict on ``setting`` for a line whose worst-case poll round is ``round_s``."""
+    if setting.stops is False or setting.timeout_s is None:
+        return Verdict.OFF
+    if setting.stops is None:
+        return Verdict.UNKNOWN
+    if setting.timeout_s < round_s:
+        return Verdict.TOO_SHORT
+    return Verdict.OK
+
+
+def suggested_timeout_s(round_s: float) -> float:
+    """A timeout to advise for a line whose worst-case poll round is ``round_s`` (0.1 s steps)."""
+    return max(SUGGESTED_MIN_S, math.ceil(round_s * SUGGESTED_ROUNDS * 10 - 1e-9) / 10)
+
+
+class WatchdogAudit:
+    """Reads, judges and (where configured) writes the watchdogs of one line's drives.
+
+    ``report(bus, drive, report)`` receives each verdict. :meth:`observing` wraps the line's
+    observer so that a drive coming online starts its audit; :meth:`attach` gives the
+    audit the line's command path once the BusMaster exists.
+    """
+
+    def __init__(
+        self,
+        plan: LinePlan,
+        *,
+        clock: Clock,
+        report: Callable[[str, str, WatchdogReport], None],
+    ) -> None:
+        self.plan = plan
+        self._clock = clock
+        self._turn = asyncio.Lock()  # one audit exchange at a time on the line
+        self.facts = spec_for(plan.protocol).watchdog
+        self.round_s = poll_round_s(plan)[0] if plan.drives else 0.0
+        self._report = report
+        self._execute: Execute | None = None
+        self._tasks: dict[str, asyncio.Task[None]] = {}
+        self._stopped = False
+        self._log = log.bind(bus=plan.name)
+
+    def attach(self, execute: Execute) -> None:
+        """Send the audit's reads and writes through ``execute`` (the line's BusMaster)."""
+        self._execute = execute
+
+    def observing(self, inner: BusObserver) -> BusObserver:
+        """``inner``, with this audit told when a drive comes online."""
+        return _AuditingObserver(inner, self)
+
+    def drive_online(self, drive: DrivePlan) -> None:
+        """``drive`` answers again: audit it (again), ending an audit still under way."""
+        if not drive.control or self._execute is None or self._stopped:
+            return
+        running = self._tasks.pop(drive.name, None)
+        if running is not None:
+            running.cancel()
+        task = asyncio.create_task(
+            self._audit(drive), name=f"bus[{self.plan.name}].watchdog[{drive.name}]"
+        )
+        self._tasks[drive.name] = task
+        task.add_done_callback(partial(self._done, drive.name))
+
+    def stop(self) -> None:
+        """Shutdown begins: nothing more goes out for the audit, whatever comes online."""
+        self._stopped = True
+        for task in self._tasks.values():
+            task.cancel()
+
+    async def aclose(self) -> None:
+        """End every audit under way (shutdown)."""
+        self._stopped = True
+        tasks = list(self._tasks.values())
+        self._tasks.clear()
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+    def _done(self, name: str, task: asyncio.Task[None]) -> None:
+        if self._tasks.get(name) is task:
+            del self._tasks[name]
+        if not task.cancelled() and task.exception() is not None:
+            exc = task.exception()
+            self._log.error("drive.watchdog_audit_failed", drive=name, error=repr(exc))
+
+    # -- one drive -------------------------------------------------------------------------
+
+    async def _audit(self, drive: DrivePlan) -> None:
+        facts = self.facts
+        if facts is None:  # pragma: no cover - every protocol has its facts
+            self._finish(drive, None, f"no watchdog facts for {self.plan.protocol}")
+            return
+        values, problem = await self._read(drive, facts)
+        if values is None and problem is None:
+            return  # the line went down or shut: the next time online audits again
+        wanted = drive.watchdog
+        if wanted is not None:
+            writes = facts.encode(wanted.timeout_s, wanted.action)
+            if values is None or not _matches(facts, values, writes):
+                written = await self._write(drive, wanted, writes)
+                if written is None:
+                    return
+                values, problem = await self._read(drive, facts)
+                if values is None and problem is None:
+                    return
+        if values is None:
+            self._finish(drive, None, problem)
+            return
+        self._finish(drive, facts.decode(values), None)
+
+    async def _exchange(self, name: str, command: Command) -> CommandResult:
+        """Carry out ``command``, then rest, keeping the audit to its share of the line."""
+        assert self._execute is not None
+        async with self._turn:
+            started = self._clock.now()
+            result = await self._execute(name, command)
+            spent = self._clock.now() - started
+            rest = spent * (1.0 - AUDIT_SHARE) / AUDIT_SHARE
+            await self._clock.sleep(min(rest, AUDIT_REST_MAX_S))
+        return result
+
+    async def _read(
+        self, drive: DrivePlan, facts: WatchdogFacts
+    ) -> tuple[list[float] | None, str | None]:
+        """The watchdog parameters' values; else None and why (None too: line gone)."""
+        values: list[float] = []
+        for parameter in facts.parameters:
+            command = Command(action=Action.READ, parameter=parameter, actor=ACTOR, internal=True)
+            result = await self._exchange(drive.name, command)
+            if result.outcome is Outcome.CANCELLED:
+                return None, None
+            value = result.value
+            if result.outcome is not Outcome.DONE or value is None:
+                return None, f"{parameter} could not be read ({result.outcome.value}: " + (
+                    f"{result.reason})" if result.reason else "no value)"
+                )
+            if isinstance(value.value, str):
+                return None, f"{parameter} read as text {value.value!r}, not a number"
+            values.append(float(value.value))
+        return values, None
+
+    async def _write(
+        self, drive: DrivePlan, wanted: WatchdogPlan, writes: tuple[tuple[str, float], ...]
+    ) -> bool | None:
+        """Write the configured setting; whether every write was done (None: line gone)."""
+        for parameter, value in writes:
+            command = Command(
+                action=Action.WRITE, parameter=parameter, value=value, persist=True, actor=ACTOR
+            )
+            result = await self._exchange(drive.name, command)
+            if result.outcome is Outcome.CANCELLED:
+                return None
+            if result.outcome is not Outcome.DONE:
+                self._log.warning(
+                    "drive.watchdog_write_failed",
+                    drive=drive.name,
+                    param=parameter,
+                    value=value,
+                    outcome=result.outcome.value,
+                    reason=result.reason or None,
+                    wanted_timeout_s=wanted.timeout_s,
+                    wanted_action=wanted.action,
+                )
+                return False
+        self._log.info(
+            "drive.watchdog_written",
+            drive=drive.name,
+            timeout_s=wanted.timeout_s,
+            action=wanted.action,
+        )
+        return True
+
+    def _finish(
+        self, drive: DrivePlan, setting: WatchdogSetting | None, problem: str | None
+    ) -> None:
+        """Report the verdict, and log it: ``off`` and ``too_short`` as warnings, with the fix."""
+        if setting is None:
+            report = WatchdogReport(None, "unknown", Verdict.UNKNOWN)
+            self._log.info("drive.watchdog_unknown", drive=drive.name, reason=problem)
+            self._report(self.plan.name, drive.name, report)
+            return
+        verdict = judge(setting, self.round_s)
+        report = WatchdogReport(setting.timeout_s, setting.action, verdict)
+        facts = self.facts
+        assert facts is not None
+        round_s = round(self.round_s, 4)
+        suggested = suggested_timeout_s(self.round_s)
+        fix = facts.advice(suggested)
+        if drive.watchdog is None:
+            fix += f", or configure the drive with watchdog: {{timeout_s: {suggested:g}}}"
+        fields: dict[str, Any] = {
+            "drive": drive.name,
+            "address": drive.address,
+            "timeout_s": setting.timeout_s,
+            "action": setting.action,
+            "poll_round_s": round_s,
+        }
+        if verdict is Verdict.OFF:
+            self._log.warning(
+                "drive.watchdog_off",
+                **fields,
+                consequence="the motor keeps running if the gateway dies",
+                fix=fix,
+            )
+        elif verdict is Verdict.TOO_SHORT:
+            self._log.warning(
+                "drive.watchdog_too_short",
+                **fields,
+                consequence="normal polling can trip the drive",
+                fix=fix,
+            )
+        elif verdict is Verdict.UNKNOWN:
+            self._log.info(
+                "drive.watchdog_unknown",
+                **fields,
+                reason=f"what {setting.action!r} does cannot be told from the parameters",
+            )
+        else:
+            self._log.info("drive.watchdog_checked", **fields, verdict=verdict.value)
+        self._report(self.plan.name, drive.name, report)
+
+
+class _AuditingObserver:
+    """A line's observer, with the audit told of drives coming online.
+
+    Only availability goes through here; the other calls are the inner observer's own
+    bound methods, so a reply costs nothing more than before.
+    """
+
+    def __init__(self, inner: BusObserver, audit: WatchdogAudit) -> None:
+        self._inner = inner
+        self._audit = audit
+        self.drive_replied = inner.drive_replied
+        self.line_availability = inner.line_availability
+        self.command_completed = inner.command_completed
+
+    def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
+        """Pass it on; a drive that came online is audited."""
+        self._inner.drive_availability(bus, drive, online, at)
+        if online:
+            self._audit.drive_online(drive)
+
+
+def _matches(
+    facts: WatchdogFacts, values: list[float], writes: tuple[tuple[str, float], ...]
+) -> bool:
+    """Whether the values read already hold what ``writes`` would write."""
+    read = dict(zip(facts.parameters, values, strict=True))
+    return all(
+        parameter in read and math.isclose(read[parameter], value, abs_tol=1e-6)
+        for parameter, value in writes
+    )
