@@ -2,7 +2,7 @@
 
 Exit codes: 0 success; 1 the drive or the line failed the request; 2 bad input from the
 user (arguments, config, a malformed frame). Each subcommand's work lives in
-``fcmaster.commands`` and its options in :mod:`fcmaster.cli_arguments`; this module only
+``fcmaster.subcommands`` and its options in :mod:`fcmaster.cli_arguments`; this module only
 dispatches and maps errors.
 """
 
@@ -40,7 +40,7 @@ def _run_async(coro: Coroutine[Any, Any, int]) -> int:
 
 
 def _options(args: argparse.Namespace) -> Any:
-    from fcmaster.commands.commission import LineOptions
+    from fcmaster.subcommands.commission import LineOptions
 
     return LineOptions(
         port=args.port,
@@ -55,7 +55,7 @@ def _options(args: argparse.Namespace) -> Any:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from fcmaster.commands import daemon
+    from fcmaster.subcommands import daemon
 
     config = args.config or DEMO_CONFIG
     demo = config.resolve() == DEMO_CONFIG  # also when named as config/demo.yaml
@@ -63,31 +63,31 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from fcmaster.commands import daemon
+    from fcmaster.subcommands import daemon
 
     return daemon.check(args.config)
 
 
 def _cmd_modbus_map(args: argparse.Namespace) -> int:
-    from fcmaster.commands import modbus_map
+    from fcmaster.subcommands import modbus_map
 
     return modbus_map.run(args.config, as_json=args.json)
 
 
 def _cmd_scan(args: argparse.Namespace) -> int:
-    from fcmaster.commands import commission
+    from fcmaster.subcommands import commission
 
     return _run_async(commission.scan(_options(args), args.addresses, as_json=args.json))
 
 
 def _cmd_status(args: argparse.Namespace) -> int:
-    from fcmaster.commands import commission
+    from fcmaster.subcommands import commission
 
     return _run_async(commission.status(_options(args), args.address, as_json=args.json))
 
 
 def _cmd_read(args: argparse.Namespace) -> int:
-    from fcmaster.commands import commission
+    from fcmaster.subcommands import commission
 
     return _run_async(
         commission.access(
@@ -98,7 +98,7 @@ def _cmd_read(args: argparse.Namespace) -> int:
 
 
 def _cmd_write(args: argparse.Namespace) -> int:
-    from fcmaster.commands import commission
+    from fcmaster.subcommands import commission
 
     return _run_async(
         commission.access(
@@ -109,7 +109,7 @@ def _cmd_write(args: argparse.Namespace) -> int:
 
 
 def _cmd_control(args: argparse.Namespace) -> int:
-    from fcmaster.commands import commission
+    from fcmaster.subcommands import commission
 
     return _run_async(
         commission.control(
@@ -125,13 +125,13 @@ def _cmd_control(args: argparse.Namespace) -> int:
 
 
 def _cmd_sim(args: argparse.Namespace) -> int:
-    from fcmaster.commands import sim
+    from fcmaster.subcommands import sim
 
     return _run_async(sim.run(args))
 
 
 def _cmd_decode(args: argparse.Namespace) -> int:
-    from fcmaster.commands import decode
+    from fcmaster.subcommands import decode
 
     return decode.run(
         args.protocol,
@@ -142,13 +142,13 @@ def _cmd_decode(args: argparse.Namespace) -> int:
 
 
 def _cmd_ports(args: argparse.Namespace) -> int:
-    from fcmaster.commands import ports
+    from fcmaster.subcommands import ports
 
     return ports.run(args.config, as_json=args.json)
 
 
 def _cmd_doctor(args: argparse.Namespace) -> int:
-    from fcmaster.commands import doctor
+    from fcmaster.subcommands import doctor
 
     return _run_async(
         doctor.run(
@@ -159,19 +159,19 @@ def _cmd_doctor(args: argparse.Namespace) -> int:
 
 
 def _cmd_capture(args: argparse.Namespace) -> int:
-    from fcmaster.commands import capture
+    from fcmaster.subcommands import capture
 
     return _run_async(capture.capture(args.url, args.bus, args.seconds, args.output, args.token))
 
 
 def _cmd_monitor(args: argparse.Namespace) -> int:
-    from fcmaster.commands import monitor
+    from fcmaster.subcommands import monitor
 
     return _run_async(monitor.run(args.url, args.token, once=args.once, interval_s=args.interval))
 
 
 def _cmd_params(args: argparse.Namespace) -> int:
-    from fcmaster.commands import params
+    from fcmaster.subcommands import params
 
     if args.params_command == "backup":
         return _run_async(params.backup(_options(args), args.address, args.output))

@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 
 from fcmaster.bus.frame_log import RX, TX, FrameLog
-from fcmaster.commands.capture import capture
 from fcmaster.errors import UsageError
 from fcmaster.protocol import pcapng
+from fcmaster.subcommands.capture import capture
 from tests.integration.daemon_harness import until
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import VIEWER_TOKEN, serving

@@ -12,9 +12,9 @@ from datetime import datetime
 import pytest
 import structlog
 
-from fcmaster.commands import commission
 from fcmaster.errors import BusError
 from fcmaster.sim import DriveSettings, FcSimDrive, LineSettings
+from fcmaster.subcommands import commission
 from tests.integration import commissioning
 
 LINE = LineSettings(protocol="danfoss-fc", baudrate=38400, parity="E")

@@ -19,9 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from fcmaster.commands import monitor
 from fcmaster.errors import UsageError
 from fcmaster.sim import DriveSettings, LineSettings
+from fcmaster.subcommands import monitor
 from tests.integration import commissioning
 from tests.integration.daemon_harness import START_S, child
 from tests.integration.ports import free_port

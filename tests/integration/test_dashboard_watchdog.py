@@ -16,9 +16,9 @@ import pytest
 from playwright.async_api import Browser, async_playwright, expect
 
 from fcmaster.cli import DEMO_CONFIG
-from fcmaster.commands.daemon import with_http_listen
 from fcmaster.config import load as load_config
 from fcmaster.service import Service
+from fcmaster.subcommands.daemon import with_http_listen
 from tests.integration.http_harness import wait_until_listening
 from tests.integration.ports import free_port
 

@@ -19,9 +19,9 @@ from websockets.asyncio.client import connect
 
 from fcmaster import config
 from fcmaster.cli import DEMO_CONFIG
-from fcmaster.commands.daemon import with_http_listen
 from fcmaster.service import Service
 from fcmaster.state import HEARTBEAT_S
+from fcmaster.subcommands.daemon import with_http_listen
 from tests.integration.http_harness import wait_until_listening
 from tests.integration.ports import free_port
 

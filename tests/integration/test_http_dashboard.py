@@ -29,10 +29,10 @@ from playwright.async_api import (
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.cli import DEMO_CONFIG
-from fcmaster.commands.daemon import with_http_listen
 from fcmaster.config import load as load_config
 from fcmaster.protocol.codec import ParameterKey, ParameterValue
 from fcmaster.service import Service
+from fcmaster.subcommands.daemon import with_http_listen
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
     OPERATOR_TOKEN,

@@ -8,8 +8,8 @@ import io
 import pytest
 
 from fcmaster.cli import COMMANDS, build_parser
-from fcmaster.commands.monitor import Fleet, render_table, run, stream_url
 from fcmaster.errors import FcmasterError, UsageError
+from fcmaster.subcommands.monitor import Fleet, render_table, run, stream_url
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import VIEWER_TOKEN, http_model, serving
 from tests.integration.ports import free_port

@@ -16,7 +16,7 @@ import serial
 from fcmaster import cli
 from fcmaster.bus.open_errors import open_error
 from fcmaster.cli import build_parser, main
-from fcmaster.commands import daemon, decode
+from fcmaster.subcommands import daemon, decode
 
 NO_PORT = "/nonexistent/ttyUSB9"
 CONTROL = ("control", "--port", NO_PORT, "--address", "1")

@@ -146,7 +146,7 @@ def test_python_dash_m_fcmaster_decode_in_a_subprocess() -> None:
 
 
 def test_hex_bytes_may_carry_0x_prefixes() -> None:
-    from fcmaster.commands.frames import parse_hex
+    from fcmaster.subcommands.frames import parse_hex
 
     assert parse_hex("0x02 0x06,0x81:04 7C") == bytes([0x02, 0x06, 0x81, 0x04, 0x7C])
 

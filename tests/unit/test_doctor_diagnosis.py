@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from fcmaster.bus.adapter import Adapter
-from fcmaster.commands.diagnosis import (
+from fcmaster.subcommands.diagnosis import (
     AddressReport,
     Expected,
     LineFormat,

@@ -11,10 +11,10 @@ import pytest
 from fcmaster.bus.adapter import Adapter
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.transport import Transport
-from fcmaster.commands.diagnosis import Survey, diagnose, to_text
-from fcmaster.commands.doctor import examine
 from fcmaster.errors import PortError, UsageError
 from fcmaster.protocol.danfoss_fc import AddressFormat, Telegram, encode_telegram
+from fcmaster.subcommands.diagnosis import Survey, diagnose, to_text
+from fcmaster.subcommands.doctor import examine
 from tests.fakes import Responder, ScriptedTransport, Timed, VirtualClock
 
 READY = 0x0607

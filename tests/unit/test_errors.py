@@ -45,7 +45,7 @@ def test_the_walk_reaches_every_layer() -> None:
     for name in (
         "fcmaster.adapters.auth",
         "fcmaster.bus.master",
-        "fcmaster.commands.commission",
+        "fcmaster.subcommands.commission",
         "fcmaster.protocol.mitsubishi.codec",
         "fcmaster.sim.enc.parameters",
         "fcmaster.state",

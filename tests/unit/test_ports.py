@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from fcmaster.bus.adapter import Machine
-from fcmaster.commands import daemon, ports
+from fcmaster.subcommands import daemon, ports
 from tests.fake_machine import CH340_BY_ID, FTDI_BY_ID, FTDI_BY_PATH, FakeMachine
 
 CONFIG = """

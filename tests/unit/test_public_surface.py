@@ -85,7 +85,7 @@ FACES: dict[str, set[str]] = {
 # fmt: on
 
 # Packages that are not a face: the CLI's commands are loaded one module at a time.
-NOT_FACES = {"fcmaster.commands"}
+NOT_FACES = {"fcmaster.subcommands"}
 
 
 @pytest.mark.parametrize("face", sorted(FACES))

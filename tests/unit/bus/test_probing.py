@@ -14,7 +14,7 @@ import math
 import pytest
 
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.commands.daemon import longest_probe_wait_s
+from fcmaster.subcommands.daemon import longest_probe_wait_s
 from tests.unit.bus.bench import (
     DELAY_S,
     PARAMETER,

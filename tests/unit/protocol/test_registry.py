@@ -12,13 +12,13 @@ import pytest
 import fcmaster
 from fcmaster.bus.plan import LinePlan
 from fcmaster.cli import build_parser
-from fcmaster.commands.commission import LineOptions
 from fcmaster.config import BusModel, parse
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.protocol.registry import DEFAULT, NAMES, PROTOCOLS, line_keys, spec_for
 from fcmaster.protocol.spec import LineKey
 from fcmaster.sim.build import SIM_PROTOCOLS
 from fcmaster.sim.settings import LineSettings
+from fcmaster.subcommands.commission import LineOptions
 
 PACKAGE = Path(fcmaster.__file__).parent
 
@@ -169,9 +169,9 @@ READS_THE_SPEC = (
     "bus/confirm.py",
     "sim/build.py",
     "adapters/discovery.py",
-    "commands/decode.py",
-    "commands/diagnosis.py",
-    "commands/doctor.py",
+    "subcommands/decode.py",
+    "subcommands/diagnosis.py",
+    "subcommands/doctor.py",
 )
 
 

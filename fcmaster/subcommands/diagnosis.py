@@ -2,7 +2,7 @@
 
 Pure: a :class:`Survey` (what the probes observed) goes in, :class:`Finding` objects come
 out, each with the sentence that names the problem and the one that says what to change.
-The probing itself lives in :mod:`fcmaster.commands.doctor`.
+The probing itself lives in :mod:`fcmaster.subcommands.doctor`.
 """
 
 from __future__ import annotations

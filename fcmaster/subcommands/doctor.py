@@ -13,7 +13,7 @@ the same address shows itself (two replies, or one garbled by the other).
 Each request's bytes are read raw rather than through the daemon's Link, because the
 doctor wants what the Link throws away: the request heard back before anything else (an
 echoing adapter), bytes outside any frame (noise), a reply's worth of bytes that never
-checks (a collision). What it concludes is :mod:`fcmaster.commands.diagnosis`'s business.
+checks (a collision). What it concludes is :mod:`fcmaster.subcommands.diagnosis`'s business.
 
 Exit codes: 0 when drives answer and there is nothing to fix; 1 when a finding needs
 fixing or no drive answers (or the port cannot be opened); 2 for bad input.
@@ -34,15 +34,6 @@ from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock, MonotonicClock
-from fcmaster.commands.diagnosis import (
-    AddressReport,
-    Expected,
-    LineFormat,
-    Survey,
-    diagnose,
-    to_json,
-    to_text,
-)
 from fcmaster.config import load
 from fcmaster.errors import (
     MalformedReply,
@@ -55,6 +46,15 @@ from fcmaster.errors import (
 from fcmaster.protocol.codec import DriveCodec, Exchange
 from fcmaster.protocol.framing import Frame
 from fcmaster.protocol.registry import spec_for
+from fcmaster.subcommands.diagnosis import (
+    AddressReport,
+    Expected,
+    LineFormat,
+    Survey,
+    diagnose,
+    to_json,
+    to_text,
+)
 
 # The rates each protocol's drives offer (fastest first) and the parities (factory first)
 # are its spec's baudrates and parities.

@@ -5,10 +5,10 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from fcmaster.commands.frames import parse_hex
 from fcmaster.errors import UsageError
 from fcmaster.protocol.registry import PROTOCOLS
 from fcmaster.protocol.spec import ProtocolSpec
+from fcmaster.subcommands.frames import parse_hex
 
 
 def run(protocol: str, frame_text: str, *, as_response: bool, as_json: bool) -> int:

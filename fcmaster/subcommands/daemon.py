@@ -16,8 +16,8 @@ from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.poll_round import poll_round_s
 from fcmaster.bus.rotation import probe_period_s
-from fcmaster.commands.ports import unstable_ports
 from fcmaster.errors import ConfigError, UsageError
+from fcmaster.subcommands.ports import unstable_ports
 
 log = structlog.get_logger("fcmaster.cli")
 

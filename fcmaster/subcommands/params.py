@@ -16,7 +16,6 @@ from pathlib import Path
 
 import yaml
 
-from fcmaster.commands.commission import LineOptions, _check_address, _Session
 from fcmaster.errors import BusError, UsageError
 from fcmaster.protocol.codec import DriveError, Exchange, ParameterValue, Reply
 from fcmaster.protocol.parameter_set import (
@@ -29,6 +28,7 @@ from fcmaster.protocol.parameter_set import (
     profile_for,
     read_set,
 )
+from fcmaster.subcommands.commission import LineOptions, _check_address, _Session
 
 EXIT_EQUAL, EXIT_DIFFERENT = 0, 1
 

@@ -1,0 +1,1 @@
+"""The CLI's subcommands, one module each; `fcmaster.cli` parses arguments and maps errors."""
