@@ -70,8 +70,8 @@ async def test_fc_backup_diff_restore_round_trip(tmp_path: Path) -> None:
         assert "3-41" in out
         assert "read back 3 s" in out
         assert drive.parameters[341] == 300
-        code, out, _ = await params(server, fc, "diff", "--address", "1", str(backup))
-        assert code == 0
+        code, out, err = await params(server, fc, "diff", "--address", "1", str(backup))
+        assert code == 0, err + out
         assert "no differences" in out
 
 
