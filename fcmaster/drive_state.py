@@ -98,7 +98,8 @@ class DriveState:
             "warning": self.warning,
             "direction": self.direction,
             "at_reference": self.at_reference,
-            "output_frequency_hz": self.output_frequency_hz,
+            # A reply's exact step (FC: 1/16384 of nominal) shown to the 0.001 Hz people read.
+            "output_frequency_hz": _hz(self.output_frequency_hz),
             "output_frequency_updated_at": rfc3339(self.output_frequency_updated_at),
             "reference_pct": self.reference_pct,
             "status_word": self.status_word,
@@ -118,3 +119,7 @@ def rfc3339(wall: float | None) -> str | None:
     if wall is None:
         return None
     return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")[:-6] + "Z"
+
+
+def _hz(value: float | None) -> float | None:
+    return None if value is None else round(value, 3)

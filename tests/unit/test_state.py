@@ -290,3 +290,16 @@ def test_an_unchanged_reading_still_refreshes_the_times_the_snapshot_shows() -> 
     )
     assert state.values["16-14"].updated_at == WALL_AT_START + 1.5
     assert fleet.snapshot()[0] is state  # built once, then kept until the next reply
+
+
+def test_the_json_shows_an_fc_output_step_to_the_thousandth_of_a_hz() -> None:
+    # 8191 of 16384 steps of a 50 Hz nominal is 24.99694824... Hz: shown as people read it.
+    def shown(hz: float | None) -> object:
+        state = DriveState(
+            name="p", bus="l", address=1, protocol="danfoss-fc", control="bus",
+            output_frequency_hz=hz,
+        )  # fmt: skip
+        return state.to_json()["output_frequency_hz"]
+
+    assert shown(8191 / 16384 * 50) == 24.997
+    assert shown(None) is None
