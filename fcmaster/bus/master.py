@@ -45,8 +45,9 @@ from fcmaster.bus.link import Link
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.planner import Completion, Planner, Report, Step, StepKind
 from fcmaster.bus.stats import DriveStats, LineStats
+from fcmaster.bus.steady import SteadyPolling
 from fcmaster.bus.transport import Transport
-from fcmaster.clock import Clock
+from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.errors import (
     PortError,
 )
@@ -120,6 +121,19 @@ class BusMaster:
         self._transport = transport
         self._clock = clock
         self._link = Link(plan, codec=codec, transport=transport, clock=clock, stats=self.stats)
+        # Polls run in callbacks where the transport and the clock allow it: see steady.py.
+        self._steady = (
+            SteadyPolling(
+                self.planner,
+                self._link,
+                clock,
+                sent=self._sent,
+                replied=self._replied,
+                failed=self._failed,
+            )
+            if self._link.steady and isinstance(clock, MonotonicClock)
+            else None
+        )
         self._observer: BusObserver = observer or _NullObserver()
         self._rng = rng or random.Random()
         self._wake = asyncio.Event()
@@ -336,13 +350,16 @@ class BusMaster:
         )
 
     async def _serve(self) -> None:
-        clock, link, planner = self._clock, self._link, self.planner
+        clock, link, planner, steady = self._clock, self._link, self.planner, self._steady
         while True:
             now = clock.now()
             step = planner.peek(now)
             if step is None:
                 self._flush_deferred()
                 await self._idle(planner.next_wakeup(now))
+                continue
+            if steady is not None and steady.carries(step):
+                await steady.run(step)  # polls in callbacks, until another kind of step
                 continue
             if link.ready_at > now:
                 # The next step was chosen (and encoded) inside the pause, where it is free.
@@ -352,33 +369,44 @@ class BusMaster:
             planner.commit(step, clock.now())
             exchange = step.exchange
             await link.send(exchange)
-            self._flush_deferred()  # the layers above get the last reply while this one travels
-            self._count_request(step)
+            self._sent(step)
             if not exchange.expects_reply:
                 self._handle(planner.on_sent(step, clock.now()))
                 continue
             # Commands wait the plan's fixed deadline: see Link.
             reply = await link.receive(exchange, adaptive=step.kind is not StepKind.COMMAND)
-            now = clock.now()
             if reply is None:
-                self._count_failure(step)
-                self._handle(planner.on_failure(step, now, self._timeout_reason(step)))
-                continue
-            now = link.replied_at
-            self._count_reply(step, reply, now - link.written_at)
-            self._handle(planner.on_reply(step, reply, now))
-            slot = step.slot
-            if slot is not None:
-                self._deferred.append(
-                    partial(
-                        self._observer.drive_replied,
-                        self.plan.name,
-                        slot.plan,
-                        reply,
-                        now,
-                        slot.intent,
-                    )
+                self._failed(step)
+            else:
+                self._replied(step, reply)
+
+    def _sent(self, step: Step) -> None:
+        """``step``'s request is on the wire."""
+        self._flush_deferred()  # the layers above get the last reply while this one travels
+        self._count_request(step)
+
+    def _replied(self, step: Step, reply: Reply) -> None:
+        """``step`` got ``reply`` (the Link has accounted for it)."""
+        now = self._link.replied_at
+        self._count_reply(step, reply, now - self._link.written_at)
+        self._handle(self.planner.on_reply(step, reply, now))
+        slot = step.slot
+        if slot is not None:
+            self._deferred.append(
+                partial(
+                    self._observer.drive_replied,
+                    self.plan.name,
+                    slot.plan,
+                    reply,
+                    now,
+                    slot.intent,
                 )
+            )
+
+    def _failed(self, step: Step) -> None:
+        """``step`` got no valid reply before its deadline."""
+        self._count_failure(step)
+        self._handle(self.planner.on_failure(step, self._clock.now(), self._timeout_reason(step)))
 
     async def _idle(self, wakeup: float | None) -> None:
         """Nothing to send: wait for a command, or for the next probe to fall due."""

@@ -30,6 +30,8 @@ class Receiver(asyncio.Protocol):
     """Collects received bytes and hands them to the one reader waiting for them."""
 
     __slots__ = (
+        "_deadline",
+        "_deadline_due",
         "_deadline_timer",
         "_gap_due",
         "_gap_timer",
@@ -56,6 +58,8 @@ class Receiver(asyncio.Protocol):
         self._handler: Handler | None = None
         self._gap_due = 0.0  # when the gap timer is set to look
         self._gap_timer: asyncio.TimerHandle | None = None
+        self._deadline = 0.0  # the watching reader's
+        self._deadline_due = 0.0  # when the deadline timer is set to look
         self._deadline_timer: asyncio.TimerHandle | None = None
 
     # -- from the port -----------------------------------------------------------------
@@ -130,17 +134,37 @@ class Receiver(asyncio.Protocol):
         self.framer, self.gap_s, self._handler = framer, gap_s, handler
         if framer.buffered:  # a frame begun in an earlier read: the gap runs from its bytes
             deadline = min(deadline, self.received_at + gap_s)
-        loop = self._loop = asyncio.get_running_loop()
-        self._deadline_timer = loop.call_later(deadline - self._now(), self._hand, None)
+        self._deadline = deadline
+        self._loop = asyncio.get_running_loop()
+        # One timer serves one deadline after another: it is moved only when it would fire
+        # too late, and when it fires early (the reader it was set for has been answered and
+        # a later one watches) it is set again for the present deadline. A timer set and
+        # cancelled for every reply would leave the loop's heap full of dead ones.
+        if self._deadline_timer is None or self._deadline_due > deadline:
+            self._set_deadline_timer(deadline)
         return None
 
     def unwatch(self) -> None:
         """Stop watching (the reader gave up); later bytes wait in the buffer."""
         self.framer = self._handler = None
-        for timer in (self._deadline_timer, self._gap_timer):
-            if timer is not None:
-                timer.cancel()
-        self._deadline_timer = self._gap_timer = None
+        if self._gap_timer is not None:
+            self._gap_timer.cancel()
+            self._gap_timer = None
+
+    def _set_deadline_timer(self, due: float) -> None:
+        if self._deadline_timer is not None:
+            self._deadline_timer.cancel()
+        self._deadline_due = due
+        self._deadline_timer = self._call_later(due, self._on_deadline)
+
+    def _on_deadline(self) -> None:
+        self._deadline_timer = None
+        if self._handler is None:
+            return  # nobody watches: the next watch sets it again
+        if self._deadline > self._now():
+            self._set_deadline_timer(self._deadline)  # set for an earlier reader
+            return
+        self._hand(None)
 
     def _on_gap(self) -> None:
         """The gap timer fired: hand over unless bytes came since it was set."""
