@@ -40,6 +40,7 @@ from fcmaster.protocol.framing import Frame, Framer, Skipped, SkipReason
 
 ANSWER_SAMPLES = 8  # replies timed before deadlines follow the line
 RECORDED = 32  # frames and events the flight recorder keeps
+PARSED_LIMIT = 4096  # requests whose last reply is kept (see Link._parse)
 
 # A transport that feeds the framer in its reader callback (SerialTransport.watch_frame).
 WatchFrame = Callable[
@@ -72,6 +73,7 @@ class Link:
         self._data: list[bytes] = [b""] * RECORDED
         self._recorded = 0
         self.frames = FrameLog()  # the frames with their times, for captures
+        self._parsed: dict[bytes, tuple[Exchange, bytes, Reply]] = {}  # see _parse
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
         self._plan_gap_s = plan.gap_s
         self.written_at = 0.0  # when the last request was written
@@ -346,7 +348,7 @@ class Link:
         stats = self.stats
         if isinstance(piece, Frame):
             try:
-                reply = self.codec.parse(exchange, piece.data)
+                reply = self._parse(exchange, piece.data)
             except UnexpectedReply:
                 stats.unexpected += 1
                 self._record("unexpected", piece.data)
@@ -370,6 +372,26 @@ class Link:
             stats.checksum_errors += 1
         self._record(str(piece.reason), piece.data)
         return None
+
+    def _parse(self, exchange: Exchange, frame: bytes) -> Reply:
+        """The codec's reply to ``frame``; the same one as last time when nothing changed.
+
+        A drive polled with the same request mostly answers with the same bytes (its status
+        and the value read unchanged). Parsing is a pure function of the exchange and the
+        frame, so the Reply from last time is the answer again, and the layers above can
+        tell an unchanged reply by its identity. Keyed by the request's bytes (whose hash
+        Python keeps), checked against the exchange itself; forgotten past
+        :data:`PARSED_LIMIT` requests, like the polls' cache.
+        """
+        parsed = self._parsed
+        last = parsed.get(exchange.request)
+        if last is not None and last[1] == frame and (last[0] is exchange or last[0] == exchange):
+            return last[2]
+        reply = self.codec.parse(exchange, frame)
+        if len(parsed) >= PARSED_LIMIT:
+            parsed.clear()
+        parsed[exchange.request] = (exchange, frame, reply)
+        return reply
 
     def _discard_rest(self) -> None:
         """Bytes after the reply are late or noise: counted, never taken for a reply."""
