@@ -150,12 +150,12 @@ class LineReporter:
         if step.pending is not None and step.pending.attempts:
             self._stats.retries += 1
         if step.slot is not None:
-            self._stats.drives[step.slot.name].requests += 1
+            self._stats.drives[step.slot.plan.name].requests += 1
 
     def count_reply(self, step: Step, reply: Reply, latency: float) -> None:
         """``step`` was answered."""
         if step.slot is not None:
-            drive = self._stats.drives[step.slot.name]
+            drive = self._stats.drives[step.slot.plan.name]
             drive.replies += 1
             drive.last_latency_s = latency
             if reply.error is not None:
