@@ -31,7 +31,6 @@ class Receiver(asyncio.Protocol):
 
     __slots__ = (
         "_deadline",
-        "_deadline_due",
         "_deadline_timer",
         "_gap_due",
         "_gap_timer",
@@ -59,7 +58,6 @@ class Receiver(asyncio.Protocol):
         self._gap_due = 0.0  # when the gap timer is set to look
         self._gap_timer: asyncio.TimerHandle | None = None
         self._deadline = 0.0  # the watching reader's
-        self._deadline_due = 0.0  # when the deadline timer is set to look
         self._deadline_timer: asyncio.TimerHandle | None = None
 
     # -- from the port -----------------------------------------------------------------
@@ -136,33 +134,28 @@ class Receiver(asyncio.Protocol):
             deadline = min(deadline, self.received_at + gap_s)
         self._deadline = deadline
         self._loop = asyncio.get_running_loop()
-        # One timer serves one deadline after another: it is moved only when it would fire
-        # too late, and when it fires early (the reader it was set for has been answered and
-        # a later one watches) it is set again for the present deadline. A timer set and
-        # cancelled for every reply would leave the loop's heap full of dead ones.
-        if self._deadline_timer is None or self._deadline_due > deadline:
-            self._set_deadline_timer(deadline)
+        # Set for this read and cancelled when it ends: a timer kept for the next read
+        # would fire during it, a wake-up for nothing (a cancelled one never wakes the loop).
+        self._set_deadline_timer(deadline)
         return None
 
     def unwatch(self) -> None:
         """Stop watching (the reader gave up); later bytes wait in the buffer."""
         self.framer = self._handler = None
-        if self._gap_timer is not None:
-            self._gap_timer.cancel()
-            self._gap_timer = None
+        for timer in (self._deadline_timer, self._gap_timer):
+            if timer is not None:
+                timer.cancel()
+        self._deadline_timer = self._gap_timer = None
 
     def _set_deadline_timer(self, due: float) -> None:
         if self._deadline_timer is not None:
             self._deadline_timer.cancel()
-        self._deadline_due = due
         self._deadline_timer = self._call_later(due, self._on_deadline)
 
     def _on_deadline(self) -> None:
         self._deadline_timer = None
-        if self._handler is None:
-            return  # nobody watches: the next watch sets it again
-        if self._deadline > self._now():
-            self._set_deadline_timer(self._deadline)  # set for an earlier reader
+        if self._deadline > self._now():  # the loop woke a hair early
+            self._set_deadline_timer(self._deadline)
             return
         self._hand(None)
 
