@@ -19,6 +19,11 @@ a command's exchange keeps the fixed deadline, since a drive may take longer ove
 (storing a parameter) and a late answer must not turn a command that was carried out into
 a timeout. ``timeout_s`` in the config overrides both.
 
+On a transport that frames in its reader callback (:meth:`Link.watch`), a reply is taken
+there, once whole, and :meth:`Link.send_now` writes from a callback: the BusMaster's steady
+polling chains exchanges that way. :meth:`Link.send` and :meth:`Link.receive` are the same
+steps for a task.
+
 The BusMaster drives a Link from its planner; the commissioning commands (scan, status,
 read, write, control) drive one directly.
 """
