@@ -43,7 +43,10 @@ import structlog
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.frame_log import FrameLog
 from fcmaster.bus.link import Link
-from fcmaster.bus.observer import BusObserver, NullObserver
+
+# BusObserver is named here too, where the layers above have always found it.
+from fcmaster.bus.observer import BusObserver as BusObserver
+from fcmaster.bus.observer import NullObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.planner import Completion, Planner, Step, StepKind
 from fcmaster.bus.reporting import LineReporter

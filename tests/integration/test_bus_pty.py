@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from fcmaster.bus.commands import Outcome
+from fcmaster.bus.commands import Action, Command, Outcome
 from fcmaster.bus.master import BACKOFF_MAX_S, BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
@@ -205,5 +205,5 @@ async def test_a_bug_met_while_polls_run_in_callbacks_restarts_the_line_like_one
         await wait_for(lambda: master.is_up, timeout_s=10.0)
         replies = master.stats.replies
         await wait_for(lambda: master.stats.replies >= replies + 20, timeout_s=10.0)
-        result = await master.drive("d1").read("16-13")
+        result = await master.execute("d1", Command(action=Action.READ, parameter="16-13"))
         assert result.outcome is Outcome.DONE
