@@ -286,11 +286,28 @@ class TapTransport:
         self.reads.append(self.inner.received_at)  # when the bytes reached the port
         return data
 
-    async def read_frame(self, framer: Framer, deadline: float, gap_s: float) -> Any:
-        piece = await self.inner.read_frame(framer, deadline, gap_s)
+    def write_now(self, data: bytes) -> None:
+        self.writes.append(now())
+        self.inner.write_now(data)
+
+    def watch_frame(
+        self, framer: Framer, deadline: float, gap_s: float, handler: Callable[[Any], None]
+    ) -> Any:
+        def noted(piece: Any) -> None:
+            if piece is not None:
+                self.reads.append(self.inner.received_at)  # when the bytes reached the port
+            handler(piece)
+
+        piece = self.inner.watch_frame(framer, deadline, gap_s, noted)
         if piece is not None:
-            self.reads.append(self.inner.received_at)  # when the bytes reached the port
+            self.reads.append(self.inner.received_at)
         return piece
+
+    def unwatch(self) -> None:
+        self.inner.unwatch()
+
+    def check_open(self) -> None:
+        self.inner.check_open()
 
     @property
     def received_at(self) -> float:

@@ -1,10 +1,15 @@
-"""Memory and CPU of `fcmaster run` on the demo fleet, as a user starts it.
+"""Memory and CPU of `fcmaster run` on the demo fleet, or on a fleet of serial lines.
 
-Run: ``python benchmarks/daemon_footprint.py [--duration 60] [--output FILE]``.
+Run: ``python benchmarks/daemon_footprint.py [--duration 60] [--fleet LINES,DRIVES,BAUD]
+[--output FILE]``.
 
-The demo (``fcmaster run`` with no ``--config``: two simulated lines, ten drives, HTTP API
-and /metrics) runs as a subprocess from an empty directory, on a free port given with
-``--http-listen``. Once it shows its drives over HTTP, its resident set size (VmRSS) and
+Without ``--fleet``, the demo (``fcmaster run`` with no ``--config``: two simulated lines,
+ten drives, HTTP API and /metrics) runs as a subprocess from an empty directory, on a free
+port given with ``--http-listen``. With ``--fleet 8,126,115200``, LINES simulators (``fcmaster
+sim``, each in a process of its own, DRIVES FC drives with their factory response delay)
+serve one pty each, and the daemon runs a config with one bus per pty (monitor-only drives,
+the default monitor list, no adapters but HTTP): the gateway with several lines. Once it
+shows its drives over HTTP, its resident set size (VmRSS) and
 CPU time (utime + stime) are read from ``/proc/PID`` once a second for ``--duration``
 seconds; the lines' request counters are read from ``/api/v1/buses`` at the start and the
 end of that window, and nothing else talks to the daemon meanwhile. Then it is stopped with
@@ -105,17 +110,62 @@ def _slope_per_min(points: list[tuple[float, float]]) -> float:
     return cov / var * 60.0 if var else float("nan")
 
 
-def measure(duration_s: float, interval_s: float) -> dict[str, Any]:
-    """Run the demo, sample it, stop it; the figures."""
+def _fleet_config(cwd: Path, lines: int, drives: int, baudrate: int) -> list[str]:
+    """Start one simulator per line; the daemon's arguments for a config of those lines."""
+    buses = []
+    for n in range(1, lines + 1):
+        buses.append(
+            f"  - name: line{n}\n    port: {cwd}/line{n}\n    protocol: danfoss-fc\n"
+            f"    baudrate: {baudrate}\n    drives:\n"
+            + "".join(f"      - {{name: l{n}d{a}, address: {a}}}\n" for a in range(1, drives + 1))
+        )
+    config = cwd / "fleet.yaml"
+    config.write_text("buses:\n" + "".join(buses) + "http:\n  anonymous: viewer\n")
+    return ["--config", str(config)]
+
+
+def _start_simulators(cwd: Path, lines: int, drives: int, baudrate: int) -> list[Any]:
+    sims = []
+    for n in range(1, lines + 1):
+        command = [sys.executable, "-m", "fcmaster", "sim", "--protocol", "danfoss-fc"]
+        command += ["--addresses", f"1-{drives}", "--baudrate", str(baudrate)]
+        command += ["--name", f"line{n}", "--link", str(cwd / f"line{n}")]
+        sims.append(
+            subprocess.Popen(
+                command,
+                cwd=cwd,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+        )
+    deadline = time.monotonic() + START_S
+    while not all((cwd / f"line{n}").exists() for n in range(1, lines + 1)):
+        if time.monotonic() > deadline:
+            raise SystemExit("the simulators did not show their ptys")
+        threading.Event().wait(0.05)
+    return sims
+
+
+def measure(
+    duration_s: float, interval_s: float, fleet: tuple[int, int, int] | None = None
+) -> dict[str, Any]:
+    """Run the daemon, sample it, stop it; the figures."""
     port = _free_port()
     base = f"http://127.0.0.1:{port}"
     pause = threading.Event()  # never set: its wait() is a sleep that ruff's ban allows
+    sims: list[Any] = []
     with tempfile.TemporaryDirectory(prefix="fcmaster-footprint-") as cwd:
         log_path = Path(cwd) / "run.log"
+        extra: list[str] = []
+        if fleet is not None:
+            sims = _start_simulators(Path(cwd), *fleet)
+            extra = _fleet_config(Path(cwd), *fleet)
         with log_path.open("wb") as log:
             started = time.monotonic()
             process = subprocess.Popen(
-                [sys.executable, "-m", "fcmaster", "run", "--http-listen", f"127.0.0.1:{port}"],
+                [sys.executable, "-m", "fcmaster", "run", "--http-listen", f"127.0.0.1:{port}",
+                 *extra],
                 cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log,
             )  # fmt: skip
         try:
@@ -128,8 +178,9 @@ def measure(duration_s: float, interval_s: float) -> dict[str, Any]:
             hwm = 0
             for i in range(int(duration_s / interval_s) + 1):
                 pause.wait(max(0.0, window_start + i * interval_s - time.monotonic()))
-                rss, hwm, threads = _rss_kib(process.pid)
-                samples.append((time.monotonic() - window_start, rss, _cpu_s(process.pid), threads))
+                rss_kib, hwm, threads = _rss_kib(process.pid)
+                at = time.monotonic() - window_start
+                samples.append((at, rss_kib, _cpu_s(process.pid), threads))
             counts_end = _requests(base)
             window_s = samples[-1][0]
             stop_at = time.monotonic()
@@ -140,6 +191,9 @@ def measure(duration_s: float, interval_s: float) -> dict[str, Any]:
             if process.poll() is None:
                 process.kill()
                 process.wait()
+            for sim in sims:
+                sim.terminate()
+                sim.wait(EXIT_S)
         log_tail = log_path.read_text(errors="replace").splitlines()[-3:]
 
     mib = 1 / 1024
@@ -168,6 +222,9 @@ def measure(duration_s: float, interval_s: float) -> dict[str, Any]:
         "cpu": {
             "seconds": cpu_s,
             "mean_pct_of_one_core": cpu_s / window_s * 100.0,
+            "s_per_1000_transactions": cpu_s
+            / max(1.0, sum(ln["transactions_per_s"] for ln in lines.values()) * window_s)
+            * 1000,
         },
         "threads": samples[-1][3],
         "transactions_per_s": sum(line["transactions_per_s"] for line in lines.values()),
@@ -186,31 +243,43 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=60.0, help="seconds to sample")
     parser.add_argument("--interval", type=float, default=1.0, help="seconds between samples")
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT, help="the JSON results")
+    parser.add_argument("--fleet", metavar="LINES,DRIVES,BAUD", help="simulated serial lines")
     args = parser.parse_args()
+    fleet = None
+    if args.fleet:
+        lines, drives, baudrate = (int(v) for v in args.fleet.split(","))
+        fleet = (lines, drives, baudrate)
     if not Path("/proc/self/stat").exists():
         raise SystemExit("this benchmark reads /proc: Linux only")
 
     load_before = os.getloadavg()
-    figures = measure(args.duration, args.interval)
+    figures = measure(args.duration, args.interval, fleet)
     load_after = os.getloadavg()
     results = {
         **results_file.provenance("daemon_footprint"),
         "load_average_before": load_before,
         "load_average_after": load_after,
         "uptime": _uptime(),
-        "fleet": "the demo (fcmaster/demo.yaml): 2 simulated lines in-process, 10 drives, HTTP",
+        "fleet": (
+            "the demo (fcmaster/demo.yaml): 2 simulated lines in-process, 10 drives, HTTP"
+            if fleet is None
+            else f"{fleet[0]} FC lines x {fleet[1]} drives at {fleet[2]} baud on ptys, "
+            "simulated in a process each; monitor-only, default monitor list, HTTP"
+        ),
         **figures,
     }
     results_file.write(args.output, results)
 
     r, c = figures["rss_mib"], figures["cpu"]
     print(
-        f"fcmaster run (demo) over {figures['window_s']:.0f} s, after {figures['startup_s']:.1f} s "
+        f"fcmaster run ({results['fleet']}) over {figures['window_s']:.0f} s, "
+        f"after {figures['startup_s']:.1f} s "
         f"to show its drives:\n"
         f"  RSS {r['start']:.1f} MiB at start, peak {r['peak']:.1f}, final {r['final']:.1f}; "
         f"last half {r['growth_last_half']:+.2f} MiB "
         f"(slope {r['slope_last_half_per_min']:+.3f} MiB/min)\n"
-        f"  CPU {c['mean_pct_of_one_core']:.1f} % of one core ({c['seconds']:.1f} s)\n"
+        f"  CPU {c['mean_pct_of_one_core']:.1f} % of one core ({c['seconds']:.1f} s; "
+        f"{c['s_per_1000_transactions']:.3f} s per 1000 transactions)\n"
         f"  {figures['transactions_per_s']:.0f} transactions/s ("
         + ", ".join(f"{n} {v['transactions_per_s']:.0f}" for n, v in figures["lines"].items())
         + f"); SIGTERM: exit {figures['exit_code']} after {figures['stop_s']:.2f} s\n"

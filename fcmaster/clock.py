@@ -23,6 +23,7 @@ import ctypes.util
 import selectors
 import sys
 import time
+from collections.abc import Callable
 from typing import ClassVar, Protocol
 
 _PR_SET_TIMERSLACK = 29
@@ -79,9 +80,9 @@ class MonotonicClock:
         self.max_lead_s = max_lead_s
         self._early = 0.0  # how much sooner than the deadline to ask to be woken
 
-    def now(self) -> float:
-        """Seconds on the monotonic clock."""
-        return time.monotonic()
+    # Seconds on the monotonic clock: the C function itself, as it is read several times a
+    # transaction (a method around it would add a Python call each time).
+    now = staticmethod(time.monotonic)
 
     # The wall clock is ``time.time`` itself, not a method around it: the fleet state stamps
     # every reply with it, and a call through a Python method would cost more than the read.
@@ -106,6 +107,55 @@ class MonotonicClock:
                 self._early = early + (late - early) * self._LEARNING_RATE
         while time.monotonic() < deadline:
             pass  # the last stretch, shorter than a wake-up's usual lateness
+
+    def call_at(self, deadline: float, callback: Callable[[], None]) -> Timer:
+        """Call ``callback`` on the running loop at ``deadline``, never before it.
+
+        :meth:`sleep_until` for a callback, with the same lead, spin and split of a long
+        wait, but no task wakes and no future is made. ``cancel()`` on what it returns calls
+        it off.
+        """
+        holder = Timer()
+        self._arm(holder, deadline, callback)
+        return holder
+
+    def _arm(self, holder: Timer, deadline: float, callback: Callable[[], None]) -> None:
+        loop = asyncio.get_running_loop()
+        wake_at = deadline - self._early
+        delay = wake_at - time.monotonic()
+        if delay > self.SPLIT_S:
+            holder.handle = loop.call_later(
+                delay - max(0.001, delay * 0.01), self._arm, holder, deadline, callback
+            )
+        elif delay > 0:
+            holder.handle = loop.call_later(delay, self._fire, wake_at, delay, deadline, callback)
+        else:
+            holder.handle = loop.call_soon(self._fire, wake_at, 0.0, deadline, callback)
+
+    def _fire(
+        self, wake_at: float, delay: float, deadline: float, callback: Callable[[], None]
+    ) -> None:
+        if 0 < delay < self.LEARN_BELOW_S:
+            early = self._early
+            late = min(time.monotonic() - wake_at, self.max_lead_s)
+            self._early = early + (late - early) * self._LEARNING_RATE
+        while time.monotonic() < deadline:
+            pass  # the last stretch, shorter than a wake-up's usual lateness
+        callback()
+
+
+class Timer:
+    """A callback :meth:`MonotonicClock.call_at` will call; ``cancel()`` calls it off."""
+
+    __slots__ = ("handle",)
+
+    def __init__(self) -> None:
+        self.handle: asyncio.Handle | None = None
+
+    def cancel(self) -> None:
+        """Do not call it (a no-op once it was called)."""
+        if self.handle is not None:
+            self.handle.cancel()
 
 
 def lower_timer_slack() -> bool:

@@ -127,6 +127,7 @@ class Service:
                 stopbits=plan.stopbits,
                 databits=plan.databits,
                 rs485=plan.rs485,
+                clock=self.clock,
             )
             self._serial_ports[plan.name] = transport
         return EchoCancellingTransport(transport) if plan.echo else transport

@@ -19,13 +19,20 @@ a command's exchange keeps the fixed deadline, since a drive may take longer ove
 (storing a parameter) and a late answer must not turn a command that was carried out into
 a timeout. ``timeout_s`` in the config overrides both.
 
+On a transport that frames in its reader callback (:meth:`Link.watch`), a reply is taken
+there, once whole, and :meth:`Link.send_now` writes from a callback: the BusMaster's steady
+polling chains exchanges that way. :meth:`Link.send` and :meth:`Link.receive` are the same
+steps for a task.
+
 The BusMaster drives a Link from its planner; the commissioning commands (scan, status,
 read, write, control) drive one directly.
 """
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable
+import asyncio
+from collections.abc import Callable
+from functools import partial
 
 from fcmaster.bus.frame_log import RX, TX, FrameLog
 from fcmaster.bus.plan import LinePlan
@@ -38,9 +45,14 @@ from fcmaster.protocol.framing import Frame, Framer, Skipped, SkipReason
 
 ANSWER_SAMPLES = 8  # replies timed before deadlines follow the line
 RECORDED = 32  # frames and events the flight recorder keeps
+PARSED_LIMIT = 4096  # requests whose last reply is kept (see Link._parse)
 
-# A transport that feeds the framer in its reader callback (SerialTransport.read_frame).
-ReadFrame = Callable[[Framer, float, float], Awaitable[Frame | Skipped | None]]
+# A transport that feeds the framer in its reader callback (SerialTransport.watch_frame).
+WatchFrame = Callable[
+    [Framer, float, float, Callable[[Frame | Skipped | None], None]], Frame | Skipped | None
+]
+# What a watch ends with: the reply (None: none came), or what ended the read.
+Answered = Callable[[Reply | None, Exception | None], None]
 
 
 class Link:
@@ -66,6 +78,7 @@ class Link:
         self._data: list[bytes] = [b""] * RECORDED
         self._recorded = 0
         self.frames = FrameLog(clock.wall)  # the frames with their times, for captures
+        self._parsed: dict[bytes, tuple[Exchange, bytes, Reply]] = {}  # see _parse
         self.pause_s = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
         self._plan_gap_s = plan.gap_s
         self.written_at = 0.0  # when the last request was written
@@ -73,8 +86,19 @@ class Link:
         self.replied_at = 0.0  # when the last byte of the last reply arrived
         self._arrived = 0.0
         self._framer = codec.new_framer()
-        # Transports that can frame as bytes arrive wake the Link once per reply.
-        self._read_frame: ReadFrame | None = getattr(transport, "read_frame", None)
+        # Transports that frame as bytes arrive and write at once (SerialTransport) let a
+        # whole exchange run in callbacks: see watch and send_now.
+        watch_frame: WatchFrame | None = getattr(transport, "watch_frame", None)
+        write_now: Callable[[bytes], None] | None = getattr(transport, "write_now", None)
+        self.steady = watch_frame is not None and write_now is not None
+        self._watch_frame: WatchFrame = watch_frame or _no_watch
+        self._write_now: Callable[[bytes], None] = write_now or _no_write
+        self._unwatch: Callable[[], None] = getattr(transport, "unwatch", _nothing)
+        self._check_open: Callable[[], None] = getattr(transport, "check_open", _nothing)
+        self._exchange: Exchange | None = None  # what the watch waits for, until when
+        self._deadline = 0.0
+        self._gap = 0.0
+        self._done: Answered | None = None
         self._replied_at: float | None = None
         # How long replies take beyond their wire time: smoothed mean and mean deviation.
         self._answer_s = 0.0
@@ -129,9 +153,21 @@ class Link:
 
     async def send(self, exchange: Exchange) -> None:
         """Wait for the line to be free, drop stale input, and write the request."""
-        clock, stats = self.clock, self.stats
-        if self.ready_at > clock.now():
-            await clock.sleep_until(self.ready_at)
+        if self.ready_at > self.clock.now():
+            await self.clock.sleep_until(self.ready_at)
+        written_at = self._writing(exchange)
+        await self.transport.write(exchange.request)
+        self._written(exchange, written_at)
+
+    def send_now(self, exchange: Exchange) -> None:
+        """:meth:`send` from a callback, once :attr:`ready_at` has passed (see :attr:`steady`)."""
+        written_at = self._writing(exchange)
+        self._write_now(exchange.request)
+        self._written(exchange, written_at)
+
+    def _writing(self, exchange: Exchange) -> float:
+        """Drop stale input before a request; when it is being written."""
+        stats = self.stats
         stale = self.transport.discard_input()
         if stale:
             stats.late_bytes += len(stale)
@@ -145,11 +181,14 @@ class Link:
                 self._missed = None
         # A miss not heard of yet may still come, during this exchange: see _drain.
         self._suspect, self._missed = self._missed, None
-        written_at = self.written_at = clock.now()
+        written_at = self.written_at = self.clock.now()
         if self._replied_at is not None:
             stats.turnaround.observe(max(0.0, written_at - self._replied_at - self.pause_s))
             self._replied_at = None
-        await self.transport.write(exchange.request)
+        return written_at
+
+    def _written(self, exchange: Exchange, written_at: float) -> None:
+        stats = self.stats
         self._record("tx", exchange.request)
         self.frames.add(TX, exchange.request, written_at)
         stats.requests += 1
@@ -164,23 +203,43 @@ class Link:
             )
             stats.busy_s += self.ready_at - written_at
 
+    def reply_deadline(self, exchange: Exchange, *, adaptive: bool = True) -> float:
+        """When to give up on the reply to the request just sent.
+
+        ``adaptive``: the deadline follows the line; otherwise it is the plan's fixed one.
+        """
+        request_length, reply_length = len(exchange.request), exchange.reply_length
+        if adaptive:
+            return self.written_at + self.deadline_s(request_length, reply_length)
+        return self.written_at + self.plan.reply_timeout(request_length, reply_length)
+
     async def receive(self, exchange: Exchange, *, adaptive: bool = True) -> Reply | None:
         """The reply to the request just sent, or None when none came before the deadline.
 
         ``adaptive``: the deadline follows the line; otherwise it is the plan's fixed one.
         """
+        deadline = self.reply_deadline(exchange, adaptive=adaptive)
+        if self.steady:
+            waiter: asyncio.Future[Reply | None] = asyncio.get_running_loop().create_future()
+            self.watch(exchange, deadline, partial(_settle, waiter))
+            try:
+                reply = await waiter
+            finally:
+                self.unwatch()
+        else:
+            reply = await self._read_until(exchange, deadline)
+        self.received(exchange, reply)
+        return reply
+
+    def received(self, exchange: Exchange, reply: Reply | None) -> None:
+        """Account for the end of the exchange just sent: ``reply``, or None for a timeout."""
         clock, stats, plan = self.clock, self.stats, self.plan
         written_at = self.written_at
-        request_length, reply_length = len(exchange.request), exchange.reply_length
-        if adaptive:
-            deadline = written_at + self.deadline_s(request_length, reply_length)
-        else:
-            deadline = written_at + plan.reply_timeout(request_length, reply_length)
-        reply = await self._read_until(exchange, deadline)
+        wire = plan.wire_s(len(exchange.request) + exchange.reply_length)
         if reply is None:
             stats.timeouts += 1
             self._record("timeout", b"")
-            self._missed = (written_at, plan.wire_s(request_length + reply_length))
+            self._missed = (written_at, wire)
             # Let a late reply finish arriving, so it is discarded, not misattributed.
             self.ready_at = clock.now() + plan.wire_s(exchange.reply_length) + self.gap_s
         else:
@@ -189,11 +248,10 @@ class Link:
             arrived = self.replied_at = max(self._arrived, written_at)
             stats.replies += 1
             stats.latency.observe(arrived - written_at)
-            self._timed(arrived - written_at - plan.wire_s(request_length + reply_length))
+            self._timed(arrived - written_at - wire)
             self._replied_at = arrived
             self.ready_at = arrived + self.pause_s
         stats.busy_s += self.ready_at - written_at
-        return reply
 
     async def transact(self, exchange: Exchange) -> Reply | None:
         """Send ``exchange`` and return its reply (None: no reply expected, or none came)."""
@@ -203,8 +261,7 @@ class Link:
         return await self.receive(exchange)
 
     async def _read_until(self, exchange: Exchange, deadline: float) -> Reply | None:
-        if self._read_frame is not None:
-            return await self._read_frames(self._read_frame, exchange, deadline)
+        """The reply, read chunk by chunk (a transport that cannot frame as bytes arrive)."""
         framer, transport, clock = self._framer, self.transport, self.clock
         gap_s = self.gap_s
         last_rx = clock.now()
@@ -225,26 +282,61 @@ class Link:
             if reply is not None:
                 return reply
 
-    async def _read_frames(
-        self, read_frame: ReadFrame, exchange: Exchange, deadline: float
-    ) -> Reply | None:
-        """The same on a transport that frames in its reader callback: one wake-up a piece."""
-        framer, transport, clock, gap_s = self._framer, self.transport, self.clock, self.gap_s
-        while True:
-            piece = await read_frame(framer, deadline, gap_s)
-            if piece is None:
-                # A gap (or the deadline): an unfinished frame will not be completed.
-                framer.reset()
-                reply = self._drain(exchange)
-                if reply is not None or clock.now() >= deadline:
-                    return reply
-                continue
-            self._arrived = transport.received_at
-            reply = self._take(exchange, piece)
-            if reply is None:
-                reply = self._drain(exchange)
-            if reply is not None:
-                return reply
+    def watch(self, exchange: Exchange, deadline: float, done: Answered) -> None:
+        """Read the reply to the request just sent in the transport's reader callback.
+
+        ``done`` is called once: with the reply, with None when none came before
+        ``deadline``, or with the exception that ended the read (the port was lost). The
+        chunks of a reply are fed to the framer as they arrive and ``done`` is called when
+        it is whole: no task wakes for it. Only where :attr:`steady` is true.
+        """
+        self._exchange, self._deadline, self._done = exchange, deadline, done
+        self._gap = self.gap_s
+        piece = self._watch_frame(self._framer, deadline, self._gap, self._on_piece)
+        if piece is not None:  # whole already (None: done will be called later)
+            self._on_piece(piece)
+
+    def unwatch(self) -> None:
+        """Stop a :meth:`watch` (``done`` will not be called)."""
+        if self._done is not None:
+            self._done = None
+            self._unwatch()
+
+    def _on_piece(self, piece: Frame | Skipped | None) -> None:
+        done = self._done
+        if done is None:
+            return
+        exchange, framer, transport = self._exchange, self._framer, self.transport
+        assert exchange is not None  # set with _done
+        try:
+            while True:
+                if piece is None:
+                    self._check_open()  # the port may have been lost meanwhile
+                    # A gap (or the deadline): an unfinished frame will not be completed.
+                    framer.reset()
+                    reply = self._drain(exchange)
+                    if reply is None and self.clock.now() < self._deadline:
+                        piece = self._watch_frame(framer, self._deadline, self._gap, self._on_piece)
+                        if piece is None:
+                            return  # wait on
+                        continue
+                else:
+                    self._arrived = transport.received_at
+                    reply = self._take(exchange, piece)
+                    if reply is None:
+                        reply = self._drain(exchange)
+                    if reply is None:
+                        piece = self._watch_frame(framer, self._deadline, self._gap, self._on_piece)
+                        if piece is None:
+                            return  # wait on
+                        continue
+                break
+        except Exception as exc:  # the port was lost: the reader hears of it
+            self._done = None
+            done(None, exc)
+            return
+        self._done = None
+        done(reply, None)
 
     def _drain(self, exchange: Exchange) -> Reply | None:
         """Hand the framer's pieces to the codec until one answers ``exchange``."""
@@ -261,7 +353,7 @@ class Link:
         stats = self.stats
         if isinstance(piece, Frame):
             try:
-                reply = self.codec.parse(exchange, piece.data)
+                reply = self._parse(exchange, piece.data)
             except UnexpectedReply:
                 stats.unexpected += 1
                 self._record("unexpected", piece.data)
@@ -286,6 +378,26 @@ class Link:
         self._record(str(piece.reason), piece.data)
         return None
 
+    def _parse(self, exchange: Exchange, frame: bytes) -> Reply:
+        """The codec's reply to ``frame``; the same one as last time when nothing changed.
+
+        A drive polled with the same request mostly answers with the same bytes (its status
+        and the value read unchanged). Parsing is a pure function of the exchange and the
+        frame, so the Reply from last time is the answer again, and the layers above can
+        tell an unchanged reply by its identity. Keyed by the request's bytes (whose hash
+        Python keeps), checked against the exchange itself; forgotten past
+        :data:`PARSED_LIMIT` requests, like the polls' cache.
+        """
+        parsed = self._parsed
+        last = parsed.get(exchange.request)
+        if last is not None and last[1] == frame and (last[0] is exchange or last[0] == exchange):
+            return last[2]
+        reply = self.codec.parse(exchange, frame)
+        if len(parsed) >= PARSED_LIMIT:
+            parsed.clear()
+        parsed[exchange.request] = (exchange, frame, reply)
+        return reply
+
     def _discard_rest(self) -> None:
         """Bytes after the reply are late or noise: counted, never taken for a reply."""
         framer = self._framer
@@ -306,3 +418,26 @@ class Link:
             f"{kinds[i % RECORDED]} {data[i % RECORDED].hex(' ')}".rstrip()
             for i in range(max(0, recorded - RECORDED), recorded)
         ]
+
+
+def _settle(
+    waiter: asyncio.Future[Reply | None], reply: Reply | None, error: Exception | None
+) -> None:
+    if waiter.done():
+        return
+    if error is not None:
+        waiter.set_exception(error)
+    else:
+        waiter.set_result(reply)
+
+
+def _nothing() -> None:
+    pass
+
+
+def _no_watch(*_: object) -> Frame | Skipped | None:
+    raise RuntimeError("this transport cannot frame in its reader callback")
+
+
+def _no_write(_: bytes) -> None:
+    raise RuntimeError("this transport cannot write from a callback")

@@ -15,7 +15,10 @@ it is on the wire. Command results are resolved at once.
 
 The pause is counted from the reply's arrival, so the work inside it is free; the clock's
 sleep must be precise for this to hold (see :mod:`fcmaster.clock`). A command that arrives
-during the pause still goes first: the poll chosen before it is taken back.
+during the pause still goes first: the poll chosen before it is taken back. On a serial
+port with the real clock, runs of polls and probes are carried in callbacks instead of by
+this loop (:mod:`~fcmaster.bus.steady`), with the same steps and the same rules; what the
+line tells the layers above goes through :mod:`~fcmaster.bus.reporting`.
 
 A port that fails (adapter unplugged, server gone) takes the line down: queued commands end
 ``cancelled`` with the reason, and the port is reopened with jittered exponential backoff
@@ -33,71 +36,33 @@ from __future__ import annotations
 
 import asyncio
 import random
-from collections.abc import Callable
 from functools import partial
-from typing import Protocol
 
 import structlog
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.frame_log import FrameLog
 from fcmaster.bus.link import Link
+
+# BusObserver is named here too, where the layers above have always found it.
+from fcmaster.bus.observer import BusObserver as BusObserver
+from fcmaster.bus.observer import NullObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.planner import Completion, Planner, Report, Step, StepKind
+from fcmaster.bus.planner import Completion, Planner, Step, StepKind
+from fcmaster.bus.reporting import LineReporter
 from fcmaster.bus.stats import DriveStats, LineStats
+from fcmaster.bus.steady import SteadyPolling
 from fcmaster.bus.transport import Transport
-from fcmaster.clock import Clock
+from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.errors import (
     PortError,
 )
 from fcmaster.protocol.codec import DriveCodec, Reply
-from fcmaster.protocol.drive import ControlIntent, pct_to_hz
 
 log = structlog.get_logger("fcmaster.bus")
 
 BACKOFF_FIRST_S = 0.5
 BACKOFF_MAX_S = 4.0  # a line is back within seconds of its port, never half a minute
-
-
-class BusObserver(Protocol):
-    """Where a BusMaster reports what it learns. Calls must be quick and never block."""
-
-    def drive_replied(
-        self, bus: str, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
-    ) -> None:
-        """A valid reply from ``drive`` on ``bus`` arrived at monotonic time ``at``.
-
-        ``commanded`` is what the master now commands the drive (None: nothing).
-        """
-
-    def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
-        """``drive`` came online or was demoted."""
-
-    def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
-        """The line's port opened or was lost."""
-
-    def command_completed(
-        self, bus: str, drive: str, command: Command, result: CommandResult
-    ) -> None:
-        """A command for ``drive`` ("*": the whole line) ended."""
-
-
-class _NullObserver:
-    def drive_replied(
-        self, bus: str, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
-    ) -> None:
-        pass
-
-    def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
-        pass
-
-    def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
-        pass
-
-    def command_completed(
-        self, bus: str, drive: str, command: Command, result: CommandResult
-    ) -> None:
-        pass
 
 
 class BusMaster:
@@ -120,7 +85,20 @@ class BusMaster:
         self._transport = transport
         self._clock = clock
         self._link = Link(plan, codec=codec, transport=transport, clock=clock, stats=self.stats)
-        self._observer: BusObserver = observer or _NullObserver()
+        # Polls run in callbacks where the transport and the clock allow it: see steady.py.
+        self._steady = (
+            SteadyPolling(
+                self.planner,
+                self._link,
+                clock,
+                sent=self._sent,
+                replied=self._replied,
+                failed=self._failed,
+            )
+            if self._link.steady and isinstance(clock, MonotonicClock)
+            else None
+        )
+        self._observer: BusObserver = observer or NullObserver()
         self._rng = rng or random.Random()
         self._wake = asyncio.Event()
         self._tried = asyncio.Event()  # the port has been tried once since __aenter__
@@ -128,8 +106,16 @@ class BusMaster:
         self._up = False
         self.stats.down_reason = "not started"
         self._closing = False
-        self._deferred: list[Callable[[], None]] = []
         self._log = log.bind(bus=plan.name, port=plan.port)
+        self._report = LineReporter(
+            plan.name,
+            planner=self.planner,
+            stats=self.stats,
+            observer=self._observer,
+            clock=clock,
+            log=self._log,
+            recent_frames=self._link.recent_frames,
+        )
 
     # -- lifecycle -----------------------------------------------------------------------
 
@@ -171,7 +157,7 @@ class BusMaster:
             self._up = False
             self.stats.down_reason = "shut down"
             self.planner.on_line_down()
-            self._resolve(self.planner.cancel_all(f"{self.plan.name} shut down"))
+            self._report.resolve(self.planner.cancel_all(f"{self.plan.name} shut down"))
             await self._transport.close()
 
     @property
@@ -185,7 +171,7 @@ class BusMaster:
         """Carry out ``command`` on drive ``name`` (None: broadcast); one result, always."""
         future: asyncio.Future[CommandResult] = asyncio.get_running_loop().create_future()
         if not self._up or self._closing:
-            self._resolve(
+            self._report.resolve(
                 [
                     Completion(
                         (future,),
@@ -199,13 +185,13 @@ class BusMaster:
                 ]
             )
         else:
-            self._resolve(self.planner.submit(name, command, future))
+            self._report.resolve(self.planner.submit(name, command, future))
             self._wake.set()
         return await future
 
     def cancel_queued(self, reason: str) -> None:
         """Shutdown: end every queued command but stops and the one on the wire, cancelled."""
-        self._resolve(self.planner.cancel_queued(reason))
+        self._report.resolve(self.planner.cancel_queued(reason))
 
     # -- the loop ------------------------------------------------------------------------
 
@@ -236,7 +222,7 @@ class BusMaster:
             self.stats.up_since = now
             self.stats.down_reason = None
             self._log.info("bus.opened")
-            self._notify(self._observer.line_availability, self.plan.name, True, "", now)
+            self._report.notify(self._observer.line_availability, self.plan.name, True, "", now)
             self._tried.set()
             try:
                 await self._serve()
@@ -299,46 +285,30 @@ class BusMaster:
         self._up = False
         self.stats.down_reason = reason
         now = self._clock.now()
-        self._flush_deferred()  # the last replies were true when they came: pass them on first
+        self._report.flush()  # the last replies were true when they came: pass them on first
         self._log.warning("bus.lost", error=reason, recent_frames=self.recent_frames)
-        self._resolve(self.planner.cancel_all(cancel_reason))
+        self._report.resolve(self.planner.cancel_all(cancel_reason))
         self.planner.on_line_down()  # when it is back, adopt the drives as at start
         self.stats.line_silent = False
         for slot in self.planner.slots:
             if slot.online:
                 slot.online = None
-                self._notify(
+                self._report.notify(
                     self._observer.drive_availability, self.plan.name, slot.plan, False, now
                 )
-        self._notify(self._observer.line_availability, self.plan.name, False, reason, now)
-
-    def _notify(self, call: Callable[..., None], *args: object) -> None:
-        """Tell the observer; what it raises is logged and goes no further than here."""
-        try:
-            call(*args)
-        except Exception as exc:  # an observer's bug must not stop the line
-            self._observer_failed(call, exc)
-
-    def _observer_failed(self, call: Callable[..., None], exc: Exception) -> None:
-        self.stats.observer_errors += 1
-        name = getattr(call, "__name__", None) or getattr(
-            getattr(call, "func", None), "__name__", "?"
-        )
-        self._log.error(
-            "bus.observer_failed",
-            call=name,
-            error=f"{type(exc).__name__}: {exc}",
-            exc_info=exc,
-        )
+        self._report.notify(self._observer.line_availability, self.plan.name, False, reason, now)
 
     async def _serve(self) -> None:
-        clock, link, planner = self._clock, self._link, self.planner
+        clock, link, planner, steady = self._clock, self._link, self.planner, self._steady
         while True:
             now = clock.now()
             step = planner.peek(now)
             if step is None:
-                self._flush_deferred()
+                self._report.flush()
                 await self._idle(planner.next_wakeup(now))
+                continue
+            if steady is not None and steady.carries(step):
+                await steady.run(step)  # polls in callbacks, until another kind of step
                 continue
             if link.ready_at > now:
                 # The next step was chosen (and encoded) inside the pause, where it is free.
@@ -348,33 +318,38 @@ class BusMaster:
             planner.commit(step, clock.now())
             exchange = step.exchange
             await link.send(exchange)
-            self._flush_deferred()  # the layers above get the last reply while this one travels
-            self._count_request(step)
+            self._sent(step)
             if not exchange.expects_reply:
-                self._handle(planner.on_sent(step, clock.now()))
+                self._report.handle(planner.on_sent(step, clock.now()))
                 continue
             # Commands wait the plan's fixed deadline: see Link.
             reply = await link.receive(exchange, adaptive=step.kind is not StepKind.COMMAND)
-            now = clock.now()
             if reply is None:
-                self._count_failure(step)
-                self._handle(planner.on_failure(step, now, self._timeout_reason(step)))
-                continue
-            now = link.replied_at
-            self._count_reply(step, reply, now - link.written_at)
-            self._handle(planner.on_reply(step, reply, now))
-            slot = step.slot
-            if slot is not None:
-                self._deferred.append(
-                    partial(
-                        self._observer.drive_replied,
-                        self.plan.name,
-                        slot.plan,
-                        reply,
-                        now,
-                        slot.intent,
-                    )
-                )
+                self._failed(step)
+            else:
+                self._replied(step, reply)
+
+    def _sent(self, step: Step) -> None:
+        """``step``'s request is on the wire."""
+        self._report.flush()  # the layers above get the last reply while this one travels
+        self._report.count_request(step)
+
+    def _replied(self, step: Step, reply: Reply) -> None:
+        """``step`` got ``reply`` (the Link has accounted for it)."""
+        now = self._link.replied_at
+        self._report.count_reply(step, reply, now - self._link.written_at)
+        self._report.handle(self.planner.on_reply(step, reply, now))
+        slot = step.slot
+        if slot is not None:
+            replied = self._observer.drive_replied
+            self._report.defer(partial(replied, self.plan.name, slot.plan, reply, now, slot.intent))
+
+    def _failed(self, step: Step) -> None:
+        """``step`` got no valid reply before its deadline."""
+        self._report.count_failure(step)
+        self._report.handle(
+            self.planner.on_failure(step, self._clock.now(), self._report.timeout_reason(step))
+        )
 
     async def _idle(self, wakeup: float | None) -> None:
         """Nothing to send: wait for a command, or for the next probe to fall due."""
@@ -392,85 +367,6 @@ class BusMaster:
         finally:
             waiter.cancel()
 
-    # -- reporting -----------------------------------------------------------------------
-
-    def _handle(self, report: Report) -> None:
-        self._resolve(report.completions)
-        now = self._clock.now()
-        if report.line_silent is not None:
-            self.stats.line_silent = report.line_silent
-            if report.line_silent:
-                self._log.warning("bus.line_silent", recent_frames=self.recent_frames)
-            else:
-                self._log.info("bus.line_answered")
-        for transition in report.transitions:
-            drive, online = transition.drive, transition.online
-            if online:
-                self._log.info("drive.came_online", drive=drive.name, address=drive.address)
-            else:
-                self._log.warning(
-                    "drive.went_offline",
-                    drive=drive.name,
-                    address=drive.address,
-                    recent_frames=self.recent_frames,
-                )
-            self._deferred.append(
-                partial(self._observer.drive_availability, self.plan.name, drive, online, now)
-            )
-
-    def _resolve(self, completions: list[Completion]) -> None:
-        for completion in completions:
-            result = completion.result
-            command = completion.command
-            if command.internal and command.action is Action.READ:
-                for ticket in completion.tickets:  # housekeeping: no audit line, no event
-                    if isinstance(ticket, asyncio.Future) and not ticket.done():
-                        ticket.set_result(result)
-                continue
-            self._log.info(
-                "command.completed",
-                actor=command.actor or "-",
-                drive=completion.drive,
-                command=command.action.value,
-                **self._values(completion.drive, command, result),
-                outcome=result.outcome.value,
-                reason=result.reason or None,
-            )
-            for ticket in completion.tickets:
-                if isinstance(ticket, asyncio.Future) and not ticket.done():
-                    ticket.set_result(result)
-            self._notify(
-                self._observer.command_completed, self.plan.name, completion.drive, command, result
-            )
-
-    def _values(self, drive: str, command: Command, result: CommandResult) -> dict[str, object]:
-        """The values a command carried (and a read returned), for its audit line."""
-        values: dict[str, object] = {}
-        if command.reference_pct is not None:
-            values["reference_pct"] = command.reference_pct
-            slot = self.planner.find(drive)
-            if slot is not None:
-                nominal = slot.plan.nominal_frequency_hz
-                values["frequency_hz"] = round(pct_to_hz(command.reference_pct, nominal), 6)
-        if command.parameter is not None:
-            values["parameter"] = command.parameter
-            if command.index:
-                values["index"] = command.index
-        if command.value is not None:
-            values["value"] = command.value
-        if result.value is not None:
-            values["read_value"] = result.value.value
-        return values
-
-    def _flush_deferred(self) -> None:
-        if self._deferred:
-            deferred, self._deferred = self._deferred, []
-            for call in deferred:
-                try:
-                    call()
-                except Exception as exc:  # the same: isolated from the line
-                    self._observer_failed(call, exc)
-
     @property
     def frames(self) -> FrameLog:
         """The line's frames with their times, for captures."""
@@ -481,27 +377,117 @@ class BusMaster:
         """The line's last frames and events, oldest first (the flight recorder)."""
         return self._link.recent_frames()
 
-    def _count_request(self, step: Step) -> None:
-        if step.pending is not None and step.pending.attempts:
-            self.stats.retries += 1
-        if step.slot is not None:
-            self.stats.drives[step.slot.name].requests += 1
 
-    def _count_reply(self, step: Step, reply: Reply, latency: float) -> None:
-        if step.slot is not None:
-            drive = self.stats.drives[step.slot.name]
-            drive.replies += 1
-            drive.last_latency_s = latency
-            if reply.error is not None:
-                drive.refused += 1
+class Drive:
+    """A handle on one drive of a running BusMaster. Every method returns one result."""
 
-    def _count_failure(self, step: Step) -> None:
-        if step.slot is not None:
-            self.stats.drives[step.slot.name].timeouts += 1
-            if step.kind is StepKind.POLL:
-                self._log.debug("poll.timed_out", address=step.slot.address)
+    __slots__ = ("_master", "plan")
 
-    def _timeout_reason(self, step: Step) -> str:
-        target = step.slot.name if step.slot else "the line"
-        tries = 1 + (step.pending.attempts if step.pending else 0)
-        return f"no valid reply from {target} after {tries} attempt(s)"
+    def __init__(self, master: BusMaster, plan: DrivePlan) -> None:
+        self._master = master
+        self.plan = plan
+
+    @property
+    def name(self) -> str:
+        """The drive's configured name."""
+        return self.plan.name
+
+    async def execute(self, command: Command) -> CommandResult:
+        """Carry out any command."""
+        return await self._master.execute(self.plan.name, command)
+
+    def reference_pct(
+        self, frequency_hz: float | None, reference_pct: float | None
+    ) -> float | None:
+        """A reference in % of nominal frequency from whichever of the two is given."""
+        if frequency_hz is not None:
+            return frequency_hz / self.plan.nominal_frequency_hz * 100.0
+        return reference_pct
+
+    async def start(
+        self,
+        *,
+        frequency_hz: float | None = None,
+        reference_pct: float | None = None,
+        actor: str = "",
+    ) -> CommandResult:
+        """Run, optionally at a new reference."""
+        return await self.execute(
+            Command(
+                action=Action.START,
+                reference_pct=self.reference_pct(frequency_hz, reference_pct),
+                actor=actor,
+            )
+        )
+
+    async def set_reference(
+        self,
+        *,
+        frequency_hz: float | None = None,
+        reference_pct: float | None = None,
+        actor: str = "",
+    ) -> CommandResult:
+        """Change the reference without changing the motion."""
+        pct = self.reference_pct(frequency_hz, reference_pct)
+        if pct is None:
+            return CommandResult(
+                outcome=Outcome.INVALID, reason="give frequency_hz or reference_pct"
+            )
+        return await self.execute(
+            Command(action=Action.SET_REFERENCE, reference_pct=pct, actor=actor)
+        )
+
+    async def stop(self, *, actor: str = "") -> CommandResult:
+        """Ramp down and stay ready."""
+        return await self.execute(Command(action=Action.STOP, actor=actor))
+
+    async def coast(self, *, actor: str = "") -> CommandResult:
+        """Switch the output off; the motor free-wheels."""
+        return await self.execute(Command(action=Action.COAST, actor=actor))
+
+    async def quick_stop(self, *, actor: str = "") -> CommandResult:
+        """Ramp down on the quick-stop ramp."""
+        return await self.execute(Command(action=Action.QUICK_STOP, actor=actor))
+
+    async def reset(self, *, actor: str = "") -> CommandResult:
+        """Acknowledge a trip (a pulse; the motor does not restart by itself)."""
+        return await self.execute(Command(action=Action.RESET, actor=actor))
+
+    async def forward(self, *, actor: str = "") -> CommandResult:
+        """Turn forward."""
+        return await self.execute(Command(action=Action.FORWARD, actor=actor))
+
+    async def reverse(self, *, actor: str = "") -> CommandResult:
+        """Turn in reverse."""
+        return await self.execute(Command(action=Action.REVERSE, actor=actor))
+
+    async def jog(self, *, actor: str = "") -> CommandResult:
+        """Run at the jog speed."""
+        return await self.execute(Command(action=Action.JOG, actor=actor))
+
+    async def read(self, parameter: str, *, index: int = 0, actor: str = "") -> CommandResult:
+        """Read a parameter; the value is in ``result.value``."""
+        return await self.execute(
+            Command(action=Action.READ, parameter=parameter, index=index, actor=actor)
+        )
+
+    async def write(
+        self,
+        parameter: str,
+        value: float,
+        *,
+        index: int = 0,
+        persist: bool = False,
+        actor: str = "",
+    ) -> CommandResult:
+        """Write a parameter (``persist``: to non-volatile memory too)."""
+        return await self.execute(
+            Command(
+                action=Action.WRITE,
+                parameter=parameter,
+                index=index,
+                value=value,
+                persist=persist,
+                actor=actor,
+            )
+        )

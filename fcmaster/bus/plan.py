@@ -89,7 +89,9 @@ class LinePlan:
 
     def wire_s(self, length: int) -> float:
         """Seconds ``length`` characters take on the wire."""
-        return length * self.char_bits / self.baudrate
+        # char_bits spelt out: this runs several times a transaction
+        bits = 1 + self.databits + (self.parity != "N") + self.stopbits
+        return length * bits / self.baudrate
 
     def reply_timeout(self, request_length: int, reply_length: int) -> float:
         """Seconds from writing a request to giving up on its reply."""

@@ -58,8 +58,9 @@ already be acting on it, and its reply must still find it at the head of its que
 The planner puts together parts with an interface each: the message types
 (:mod:`~fcmaster.bus.steps`), admission (:mod:`~fcmaster.bus.admission`: what is refused
 before it is queued), queue discipline (:mod:`~fcmaster.bus.queue`), polls, probes and
-liveness (:mod:`~fcmaster.bus.rotation`) and the control-intent algebra
-(:mod:`~fcmaster.bus.intents`). What is left here is a command's way through its exchanges
+liveness (:mod:`~fcmaster.bus.rotation`), the control-intent algebra
+(:mod:`~fcmaster.bus.intents`) and the commands waiting for confirmation
+(:mod:`~fcmaster.bus.confirming`). What is left here is a command's way through its exchanges
 and what each reply or failure means for it.
 """
 
@@ -68,16 +69,9 @@ from __future__ import annotations
 import dataclasses
 
 from fcmaster.bus import admission
-from fcmaster.bus.commands import Action, Command, CommandResult, Outcome, describe
-from fcmaster.bus.confirm import (
-    LOCAL,
-    SHOWS_RUNNING,
-    confirm_time,
-    needs_confirmation,
-    note_ramp,
-    ramp_keys,
-    verdict,
-)
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.confirm import LOCAL, needs_confirmation, note_ramp, ramp_keys
+from fcmaster.bus.confirming import Confirmations
 from fcmaster.bus.intents import (
     adopted,
     apply,
@@ -153,7 +147,7 @@ class Planner:
                 self._queue.add(Pending(stop, slot, []), None)
         self.rotation = Rotation(plan, self.slots)
         self._in_flight: Pending | None = None  # the command whose step is on the wire
-        self._confirming: list[Pending] = []  # acknowledged, waiting for the status to show it
+        self._confirming = Confirmations()  # acknowledged, waiting for the status to show it
         self._ramp_keys = ramp_keys(codec)  # read from each bus-controlled drive once online
         self._peeked: Step | None = None  # the step peek chose, until it is committed
 
@@ -182,9 +176,7 @@ class Planner:
     def cancel_all(self, reason: str) -> list[Completion]:
         """End every queued command as cancelled (shutdown, line lost)."""
         ended = self._queue.cancel_all(reason)
-        for pending in list(self._confirming):
-            why = f"{reason} before the drive's status showed the result"
-            ended.append(self._confirmed(pending, result_of(Outcome.UNCONFIRMED, why)))
+        ended.extend(self._confirming.end_all(reason))
         self._in_flight = None
         self._peeked = None
         return ended
@@ -337,7 +329,7 @@ class Planner:
         if step.pending is not None:
             self._advance(step.pending, report, None, now)
         if self._confirming:
-            self._expire(now, report)
+            self._confirming.expire(now, report)
         deaf_s = step.exchange.deaf_s
         if deaf_s > 0:
             for target in self._targets(step.slot):
@@ -356,7 +348,7 @@ class Planner:
             # After the command's own intent: a trip in the reply to a start still stops.
             slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP)
         if self._confirming:
-            self._expire(now, report)
+            self._confirming.expire(now, report)
         return report
 
     def on_failure(self, step: Step, now: float, reason: str) -> Report:
@@ -389,12 +381,9 @@ class Planner:
                 demoted.urgent_reads.clear()
                 demoted.ramps_asked = False  # read again when it returns: it may be another
                 forget(demoted)  # adopt again when it returns
-                why = "the drive stopped answering before its status showed the result"
-                for waiting in list(demoted.confirming):
-                    done = self._confirmed(waiting, result_of(Outcome.UNCONFIRMED, why))
-                    report.completions.append(done)
+                self._confirming.drive_lost(demoted, report)
         if self._confirming:
-            self._expire(now, report)
+            self._confirming.expire(now, report)
         return report
 
     def _heard(self, slot: DriveSlot, step: Step, reply: Reply, now: float, report: Report) -> bool:
@@ -418,7 +407,7 @@ class Planner:
         status = reply.status
         if status is None:
             if slot.confirming and conditions is not None:
-                self._judge(slot, now, report)
+                self._confirming.judge(slot, now, report)
             return False
         alarms_changed = status.fault != slot.fault
         warnings_changed = status.warning != slot.warning
@@ -428,7 +417,7 @@ class Planner:
         if tripped:
             slot.alarms_read = False  # which alarm it is comes with the next read of its word
         if slot.confirming:
-            self._judge(slot, now, report)
+            self._confirming.judge(slot, now, report)
         if alarms_changed or warnings_changed:
             for key in self.codec.condition_parameters(
                 alarms=alarms_changed, warnings=warnings_changed
@@ -480,7 +469,7 @@ class Planner:
                 return
             for target in self._targets(slot):
                 target.intent = without_reset(pending.intent)
-                self._replace_confirming(target, command, report)
+                self._confirming.replace(target, command, report)
             confirm = needs_confirmation(pending)
             if reply is not None and reply.status and not reply.status.accepts_bus_control:
                 outcome = Outcome.UNCONFIRMED if confirm else Outcome.REFUSED
@@ -490,12 +479,7 @@ class Planner:
                 self._finish(pending, report, result_of(Outcome.DONE, ""))
                 return
             self._queue.remove(pending)
-            pending.phase = Phase.CONFIRMING
-            pending.confirm_s = confirm_time(slot, pending)
-            pending.confirm_by = now + pending.confirm_s
-            slot.confirming.append(pending)
-            self._confirming.append(pending)
-            self._judge(slot, now, report)
+            self._confirming.start(pending, slot, now, report)
             return
         pending.part += 1
         if pending.part < len(pending.access):
@@ -504,41 +488,6 @@ class Planner:
             return
         value = None if reply is None else reply.value
         self._finish(pending, report, CommandResult(outcome=Outcome.DONE, value=value))
-
-    def _judge(self, slot: DriveSlot, now: float, report: Report) -> None:
-        """End the drive's commands whose result its status now shows, or cannot show."""
-        for pending in list(slot.confirming):
-            result = verdict(slot, pending, now)
-            if result is not None:
-                report.completions.append(self._confirmed(pending, result))
-
-    def _expire(self, now: float, report: Report) -> None:
-        """End the commands whose confirmation deadline has passed (checked per exchange)."""
-        for pending in list(self._confirming):
-            if pending.confirm_by <= now and pending.slot is not None:
-                result = verdict(pending.slot, pending, now)
-                if result is not None:
-                    report.completions.append(self._confirmed(pending, result))
-
-    def _replace_confirming(self, slot: DriveSlot, command: Command, report: Report) -> None:
-        """A newer motion command asks the opposite of what the drive's waiting ones do."""
-        wanted = SHOWS_RUNNING.get(command.action)
-        if wanted is None:
-            return  # references, directions and resets leave a start or stop to show itself
-        for pending in list(slot.confirming):
-            if SHOWS_RUNNING[pending.command.action] is not wanted:
-                why = f"superseded by {describe(command)} before its status showed the result"
-                report.completions.append(
-                    self._confirmed(pending, result_of(Outcome.SUPERSEDED, why))
-                )
-
-    def _confirmed(self, pending: Pending, result: CommandResult) -> Completion:
-        """A command waiting for its confirmation ends with ``result``."""
-        assert pending.slot is not None
-        pending.slot.confirming.remove(pending)
-        self._confirming.remove(pending)
-        pending.phase = Phase.ENDED
-        return completion_of(pending, result)
 
     def _finish(self, pending: Pending, report: Report, result: CommandResult) -> None:
         # Usually the head of its queue; a command behind one for a restarting drive may

@@ -9,10 +9,11 @@ import asyncio
 from collections.abc import AsyncIterator
 from contextlib import ExitStack, asynccontextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from fcmaster.bus.commands import Outcome
+from fcmaster.bus.commands import Action, Command, Outcome
 from fcmaster.bus.master import BACKOFF_MAX_S, BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.serial import SerialTransport
@@ -181,3 +182,29 @@ async def test_an_adapter_plugged_back_in_is_opened_at_once_not_after_the_backof
         opened_after = clock.now() - plugged
         await wait_for(lambda: master.planner.slot("d1").online, timeout_s=5.0)
     assert opened_after < 0.5
+
+
+async def test_a_bug_met_while_polls_run_in_callbacks_restarts_the_line_like_one_in_its_loop(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Steady polling runs in the port's reader callback and in timers: what it raises must
+    # still reach the master's supervision (logged, the line restarted), not the event
+    # loop's exception handler, where it would be printed and the line would hang.
+    async with line_with_master(FaultPlan()) as (_, master):
+        await wait_for(lambda: master.stats.replies >= 20)
+        on_reply = master.planner.on_reply
+        raised: list[int] = []
+
+        def broken(*args: Any, **kwargs: Any) -> Any:
+            if not raised:
+                raised.append(1)
+                raise RuntimeError("a bug in the planner")
+            return on_reply(*args, **kwargs)
+
+        monkeypatch.setattr(master.planner, "on_reply", broken)
+        await wait_for(lambda: master.stats.crashes == 1, timeout_s=5.0)
+        await wait_for(lambda: master.is_up, timeout_s=10.0)
+        replies = master.stats.replies
+        await wait_for(lambda: master.stats.replies >= replies + 20, timeout_s=10.0)
+        result = await master.execute("d1", Command(action=Action.READ, parameter="16-13"))
+        assert result.outcome is Outcome.DONE

@@ -145,6 +145,42 @@ async def test_a_read_with_nothing_arriving_times_out_at_its_deadline(
         await transport.close()
 
 
+class _ShiftedClock(MonotonicClock):
+    """A real clock whose timebase is not the event loop's (an hour ahead)."""
+
+    SHIFT_S = 3600.0
+
+    def now(self) -> float:
+        return super().now() + self.SHIFT_S
+
+
+async def test_arrivals_and_deadlines_are_on_the_transports_clock_not_the_loops(
+    pty_pair: tuple[int, str],
+) -> None:
+    controller, path = pty_pair
+    clock = _ShiftedClock()
+    transport = SerialTransport(path, baudrate=19200, clock=clock)
+    await transport.open()
+    framer = FcFramer()
+    try:
+        # On the loop's timebase this deadline would be an hour away; on the clock's it is
+        # 50 ms, and the read ends then.
+        deadline = clock.now() + 0.05
+        async with asyncio.timeout(5):
+            assert await transport.read_frame(framer, deadline, 0.01) is None
+            with pytest.raises(ReplyTimeout):
+                await transport.read(clock.now() + 0.05)
+        assert clock.now() >= deadline
+        before = clock.now()
+        os.write(controller, FC_REPLY)
+        async with asyncio.timeout(5):
+            piece = await transport.read_frame(framer, clock.now() + 5.0, 1.0)
+        assert piece == Frame(FC_REPLY)
+        assert before <= transport.received_at <= clock.now()  # stamped on the clock
+    finally:
+        await transport.close()
+
+
 async def test_stale_input_is_discarded_and_returned(pty_pair: tuple[int, str]) -> None:
     controller, path = pty_pair
     transport = SerialTransport(path, baudrate=19200)

@@ -2,6 +2,7 @@
 
 import asyncio
 import time
+from functools import partial
 
 import pytest
 
@@ -93,3 +94,51 @@ async def test_a_long_wait_ends_with_a_short_sleep(monkeypatch: pytest.MonkeyPat
     assert len(fake.sleeps) == 2
     assert fake.sleeps[-1] <= 0.001 + 1e-9
     assert sum(fake.sleeps) == pytest.approx(0.010)
+
+
+def _note_time(clock: MonotonicClock, called: asyncio.Future[float]) -> None:
+    called.set_result(clock.now())
+
+
+async def _called_at(clock: MonotonicClock) -> list[tuple[float, float]]:
+    """(deadline, called) for each delay through call_at, several times over."""
+    seen = []
+    for _ in range(5):
+        for delay in (*DELAYS_S, 0.012):  # the last one is split, as a long sleep is
+            deadline = clock.now() + delay
+            called: asyncio.Future[float] = asyncio.get_running_loop().create_future()
+            clock.call_at(deadline, partial(_note_time, clock, called))
+            seen.append((deadline, await called))
+    return seen
+
+
+def test_calls_on_the_precise_loop_never_come_before_their_deadline() -> None:
+    with asyncio.Runner(loop_factory=new_event_loop) as runner:
+        seen = runner.run(_called_at(MonotonicClock()))
+    assert all(called >= deadline for deadline, called in seen)
+
+
+async def test_calls_on_the_default_loop_never_come_before_their_deadline() -> None:
+    seen = await _called_at(MonotonicClock())
+    assert all(called >= deadline for deadline, called in seen)
+
+
+async def test_a_call_cancelled_is_not_made_even_after_a_split() -> None:
+    clock = MonotonicClock()
+    calls: list[str] = []
+    short = clock.call_at(clock.now() + 0.001, lambda: calls.append("short"))
+    long = clock.call_at(clock.now() + 0.02, lambda: calls.append("long"))
+    short.cancel()
+    await asyncio.sleep(0.015)  # the long one's first stretch has passed: it is re-armed
+    long.cancel()
+    await asyncio.sleep(0.03)
+    assert calls == []
+
+
+async def test_a_call_due_already_is_made_on_the_next_turn_of_the_loop() -> None:
+    clock = MonotonicClock()
+    calls: list[str] = []
+    clock.call_at(clock.now() - 1.0, lambda: calls.append("due"))
+    assert calls == []  # never from inside call_at
+    await asyncio.sleep(0)
+    assert calls == ["due"]
