@@ -160,9 +160,10 @@ class ProtocolSpec(Generic[OptionsT]):
     link_type: int  # its pcapng link type in captures (a private USER type, 147-162)
     # The drive's communication watchdog: its parameters, their values, what counts as off
     watchdog: WatchdogFacts
-    # Option sets the doctor tries, in order, at character formats where the line's own
-    # options found no drive: drives that answer only to one of them are set that way (FC:
-    # drives that know only the 1-31 address format). Each is complete, or takes defaults.
+    # Option sets the doctor tries, in order, at a character format where the options'
+    # defaults found no drive: drives that answer only to one of them must be set that way
+    # on the line (FC: drives that know only the 1-31 address format). The keys named here
+    # are the ones the doctor shows and compares with the config.
     fallback_options: tuple[OptionPairs, ...] = ()
 
     def options_of(self, source: object = None) -> OptionsT:
@@ -225,6 +226,11 @@ class ProtocolSpec(Generic[OptionsT]):
             elif problem := key.problem(value):
                 problems.append(f"{name} {problem}")
         return problems
+
+    def probed_options(self, source: object = None) -> OptionPairs:
+        """``source``'s values of the keys the doctor probes (those ``fallback_options`` name)."""
+        probed = {name for pairs in self.fallback_options for name, _ in pairs}
+        return tuple(pair for pair in self.option_pairs(source) if pair[0] in probed)
 
     def owns_key(self, name: str) -> bool:
         """Whether ``name`` is one of this protocol's own line keys."""
