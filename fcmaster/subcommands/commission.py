@@ -7,6 +7,16 @@ open port for one drive: `status` lets it poll one round of the drive's monitor 
 :class:`~fcmaster.state.FleetState`, its observer, as the daemon's lines do; `control`
 hands it the command and awaits its one result, so limits are checked and a running drive
 is adopted, never jolted, exactly as in the daemon.
+
+Why `read` and `write` stay on the Link: a BusMaster writes parameters only to a ``control:
+bus`` drive (a write counts as commanding), and such a drive is adopted and its control
+word fed, which stops when the command exits, so its watchdog could then trip a running
+motor for the sake of a parameter. On a monitor-only plan the master refuses the write;
+letting it through would weaken that rule for the daemon too. A read alone could go
+through a monitor-only master, but it would add the master's idle polls (and demotion and
+retries on a silent address) to what is today one exchange, and split `read` from `write`.
+The Link carries the same wire discipline (pauses, stale input, echo, deadlines) and the
+exchanges are the codec's own, built with no control intent, as a monitor-only master's.
 """
 
 from __future__ import annotations
