@@ -17,7 +17,7 @@ from typing import Any
 from fcmaster.cli_arguments import DEMO_CONFIG, build_parser
 from fcmaster.clock import new_event_loop
 from fcmaster.errors import BusError, CommandError, ConfigError, FcmasterError, UsageError
-from fcmaster.protocol.registry import line_keys
+from fcmaster.protocol.registry import spec_for
 
 __all__ = [
     "COMMANDS",
@@ -49,8 +49,10 @@ def _options(args: argparse.Namespace) -> Any:
         parity=args.parity,
         stopbits=args.stopbits,
         timeout_s=args.timeout,
-        # each protocol's own keys, as the options of the same names parsed them
-        **{key.name: getattr(args, key.name) for key, _ in line_keys()},
+        # the protocol's own keys, as the options of the same names parsed them
+        protocol_options=tuple(
+            (key.name, getattr(args, key.name)) for key in spec_for(args.protocol).line_keys
+        ),
     )
 
 

@@ -7,10 +7,13 @@ derive the same figures from the same character format.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 from dataclasses import dataclass, field
+from typing import Any
 
 from fcmaster.protocol.registry import DEFAULT
+from fcmaster.protocol.spec import OptionPairs
 
 
 class OnStart(enum.StrEnum):
@@ -106,3 +109,18 @@ class LinePlan:
         The floor covers USB adapters, which deliver bytes in batches a millisecond apart.
         """
         return max(3.5 * self.char_s, 0.002)
+
+
+def with_protocol_options(plan: LinePlan, pairs: OptionPairs) -> LinePlan:
+    """``plan`` carrying a protocol's own line keys ``pairs``.
+
+    Each goes to the plan's field of the same name where it has one, else among its
+    ``protocol_options``, so a protocol whose keys have no field here needs none.
+    """
+    # values of the spec's keys (its LineKeys say what each may be), typed as the spec's
+    fields: dict[str, Any] = {name: value for name, value in pairs if name in _FIELDS}
+    extra = tuple((name, value) for name, value in pairs if name not in _FIELDS)
+    return dataclasses.replace(plan, **fields, protocol_options=plan.protocol_options + extra)
+
+
+_FIELDS = frozenset(f.name for f in dataclasses.fields(LinePlan))

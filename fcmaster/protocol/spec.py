@@ -41,6 +41,8 @@ OptionsT = TypeVar("OptionsT")
 
 # The value a line key may take: a choice (31, "crlf") or a number; None where null is allowed.
 KeyValue = int | str | None
+# Some of a protocol's options as (line key, value) pairs, the way a plan carries them.
+OptionPairs = tuple[tuple[str, KeyValue], ...]
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
@@ -64,6 +66,24 @@ class LineKey:
     metavar: str | None = None  # the CLI's name for a number's value ("MS|none")
     # The simulated drives take it from the line too (`fcmaster sim --KEY`).
     simulated: bool = False
+
+    def problem(self, value: object) -> str:
+        """Why ``value`` cannot be this key's ("" when it can)."""
+        if value is None:
+            return "" if self.nullable else "must be given (null is not allowed)"
+        if self.choices:
+            if value in self.choices and type(value) is type(self.choices[0]):
+                return ""
+            *first, last = (str(c) for c in self.choices)
+            return f"{value!r} is not {', '.join(first)} or {last}"
+        if (
+            isinstance(value, int)
+            and not isinstance(value, bool)
+            and self.minimum <= value <= self.maximum
+            and (value - self.minimum) % self.step == 0
+        ):
+            return ""
+        return f"{value!r} is not {self.minimum}-{self.maximum} in steps of {self.step}"
 
 
 @dataclass(slots=True, frozen=True)
@@ -140,6 +160,11 @@ class ProtocolSpec(Generic[OptionsT]):
     link_type: int  # its pcapng link type in captures (a private USER type, 147-162)
     # The drive's communication watchdog: its parameters, their values, what counts as off
     watchdog: WatchdogFacts
+    # Option sets the doctor tries, in order, at a character format where the options'
+    # defaults found no drive: drives that answer only to one of them must be set that way
+    # on the line (FC: drives that know only the 1-31 address format). The keys named here
+    # are the ones the doctor shows and compares with the config.
+    fallback_options: tuple[OptionPairs, ...] = ()
 
     def options_of(self, source: object = None) -> OptionsT:
         """This protocol's options as ``source`` has them.
@@ -179,6 +204,33 @@ class ProtocolSpec(Generic[OptionsT]):
         reason = f"{address} is outside {addresses.start}-{addresses.stop - 1}"
         hint = self.address_hint(self.options_of(source), address)
         return f"{reason}: {hint}" if hint else reason
+
+    def option_pairs(self, source: object = None) -> OptionPairs:
+        """This protocol's options as ``source`` has them, as (line key, value) pairs."""
+        options = self.options_of(source)
+        return tuple((k.name, getattr(options, k.name)) for k in self.line_keys)
+
+    def option_problems(self, pairs: OptionPairs, *, simulated: bool = False) -> list[str]:
+        """What is wrong with ``pairs`` as this protocol's options, every problem at once.
+
+        A key must be one of this protocol's line keys (with ``simulated``: one the
+        simulated drives take) and its value one the key allows.
+        """
+        keys = {k.name: k for k in self.line_keys if k.simulated or not simulated}
+        problems = []
+        for name, value in pairs:
+            key = keys.get(name)
+            if key is None:
+                what = "simulated " if simulated else ""
+                problems.append(f"{self.name} {what}lines have no {name}")
+            elif problem := key.problem(value):
+                problems.append(f"{name} {problem}")
+        return problems
+
+    def probed_options(self, source: object = None) -> OptionPairs:
+        """``source``'s values of the keys the doctor probes (those ``fallback_options`` name)."""
+        probed = {name for pairs in self.fallback_options for name, _ in pairs}
+        return tuple(pair for pair in self.option_pairs(source) if pair[0] in probed)
 
     def owns_key(self, name: str) -> bool:
         """Whether ``name`` is one of this protocol's own line keys."""

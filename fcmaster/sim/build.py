@@ -13,11 +13,12 @@ import importlib
 import random
 from collections.abc import Iterable, Mapping
 from functools import partial
-from typing import Any, Final
+from typing import Final
 
 from fcmaster.clock import Clock
 from fcmaster.errors import UsageError
-from fcmaster.protocol.registry import PROTOCOLS
+from fcmaster.protocol.registry import PROTOCOLS, spec_for
+from fcmaster.protocol.spec import OptionPairs
 from fcmaster.sim.adapter import LatencyAdapter
 from fcmaster.sim.line import SimLine
 from fcmaster.sim.settings import DriveSettings, LineSettings
@@ -39,14 +40,15 @@ SIM_PROTOCOLS: Final[Mapping[str, SimProtocol]] = {
 }
 
 
-def simulated_keys(source: object) -> dict[str, Any]:
-    """The line keys the simulated drives take (``LineKey.simulated``), as ``source`` has them."""
-    return {
-        key.name: getattr(source, key.name)
-        for spec in PROTOCOLS.values()
-        for key in spec.line_keys
-        if key.simulated and hasattr(source, key.name)
-    }
+def simulated_keys(protocol: str, source: object) -> OptionPairs:
+    """The line keys of ``protocol`` its simulated drives take, as ``source`` has them.
+
+    Those marked ``LineKey.simulated``, as (key, value) pairs for ``LineSettings``; a key
+    ``source`` lacks takes its default (``ProtocolSpec.options_of``).
+    """
+    spec = spec_for(protocol)
+    simulated = {key.name for key in spec.line_keys if key.simulated}
+    return tuple((name, value) for name, value in spec.option_pairs(source) if name in simulated)
 
 
 def build_line(

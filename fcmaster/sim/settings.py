@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from fcmaster.errors import UsageError
-from fcmaster.protocol.registry import DEFAULT
+from fcmaster.protocol.registry import DEFAULT, PROTOCOLS
+from fcmaster.protocol.spec import OptionPairs
 from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.motor import Motor, MotorRating
 
@@ -72,10 +73,9 @@ class LineSettings:
     stopbits: int = 1
     databits: int = 8
     faults: FaultPlan = field(default_factory=FaultPlan)
-    # the line keys the simulated drives take (LineKey.simulated): hex | decimal
-    address_encoding: str = "hex"
-    response_encoding: str = "hex"
-    fault_encoding: str = "hex"
+    # The protocol's line keys the simulated drives take (LineKey.simulated), as (key,
+    # value) pairs; a key left out takes the spec's default (ProtocolSpec.options_of).
+    protocol_options: OptionPairs = ()
     # a USB adapter's latency timer between the line and the master (None: none, as a pty)
     adapter_latency_ms: float | None = None
     # repeated addresses are drives that both answer (a replaced drive left at the old one's)
@@ -86,9 +86,12 @@ class LineSettings:
             raise UsageError("an adapter's latency timer is 1-255 ms (FTDI allows 1-255)")
         if self.parity not in ("N", "E", "O"):
             raise UsageError(f"parity {self.parity!r} is not N, E or O")
-        for name in ("address_encoding", "response_encoding", "fault_encoding"):
-            if getattr(self, name) not in ("hex", "decimal"):
-                raise UsageError(f"{name} {getattr(self, name)!r} is not hex or decimal")
+        if self.protocol in PROTOCOLS:  # an unknown one is refused when the line is built
+            problems = PROTOCOLS[self.protocol].option_problems(
+                self.protocol_options, simulated=True
+            )
+            if problems:
+                raise UsageError("; ".join(problems))
         if self.stopbits not in (1, 2) or self.databits not in (7, 8) or self.baudrate <= 0:
             raise UsageError("stop bits are 1 or 2, data bits 7 or 8, baud rate positive")
 

@@ -7,6 +7,16 @@ open port for one drive: `status` lets it poll one round of the drive's monitor 
 :class:`~fcmaster.state.FleetState`, its observer, as the daemon's lines do; `control`
 hands it the command and awaits its one result, so limits are checked and a running drive
 is adopted, never jolted, exactly as in the daemon.
+
+Why `read` and `write` stay on the Link: a BusMaster writes parameters only to a ``control:
+bus`` drive (a write counts as commanding), and such a drive is adopted and its control
+word fed, which stops when the command exits, so its watchdog could then trip a running
+motor for the sake of a parameter. On a monitor-only plan the master refuses the write;
+letting it through would weaken that rule for the daemon too. A read alone could go
+through a monitor-only master, but it would add the master's idle polls (and demotion and
+retries on a silent address) to what is today one exchange, and split `read` from `write`.
+The Link carries the same wire discipline (pauses, stale input, echo, deadlines) and the
+exchanges are the codec's own, built with no control intent, as a monitor-only master's.
 """
 
 from __future__ import annotations
@@ -21,14 +31,15 @@ from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.link import Link
 from fcmaster.bus.master import BusMaster, BusObserver
-from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.bus.plan import DrivePlan, LinePlan, with_protocol_options
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.bus.stats import DriveStats
 from fcmaster.clock import MonotonicClock
 from fcmaster.errors import BusError, CommandError, UsageError
 from fcmaster.protocol.codec import DriveCodec, Reply
 from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, hz_to_pct, pct_to_hz
-from fcmaster.protocol.registry import spec_for
+from fcmaster.protocol.registry import DEFAULT, spec_for
+from fcmaster.protocol.spec import OptionPairs
 from fcmaster.state import FleetState
 
 # The actions a --frequency or --reference means something to.
@@ -40,21 +51,24 @@ class LineOptions:
     """The line options every port-opening command takes."""
 
     port: str
-    protocol: str = "danfoss-fc"
+    protocol: str = DEFAULT
     baudrate: int | None = None
     parity: str | None = None
     stopbits: int | None = None
-    address_format: int = 126
     timeout_s: float | None = None
-    terminator: str = "cr"  # mitsubishi only, as the line's config keys
-    wait_time_ms: int | None = 0
-    address_encoding: str = "hex"  # enc only, as the line's config keys
-    response_encoding: str = "hex"
-    fault_encoding: str = "hex"
+    # The protocol's own line keys given (ProtocolSpec.line_keys), as (key, value) pairs;
+    # a key left out takes the spec's default.
+    protocol_options: OptionPairs = ()
+
+    def __post_init__(self) -> None:
+        problems = spec_for(self.protocol).option_problems(self.protocol_options)
+        if problems:
+            raise UsageError("; ".join(problems))
 
     def plan(self, drives: tuple[DrivePlan, ...] = ()) -> LinePlan:
         """A line plan with the protocol's factory settings where nothing was given."""
-        factory = spec_for(self.protocol).factory
+        spec = spec_for(self.protocol)
+        factory = spec.factory
         plan = LinePlan(
             name="cli",
             port=self.port,
@@ -62,16 +76,12 @@ class LineOptions:
             baudrate=self.baudrate or factory.baudrate,
             parity=self.parity or factory.parity,
             stopbits=self.stopbits or factory.stopbits,
-            address_format=self.address_format,
             timeout_s=self.timeout_s,
-            terminator=self.terminator,
-            wait_time_ms=self.wait_time_ms,
-            address_encoding=self.address_encoding,
-            response_encoding=self.response_encoding,
-            fault_encoding=self.fault_encoding,
             retries=1,
             drives=drives,
         )
+        # every key of the protocol, so a plan field's default never stands in for the spec's
+        plan = with_protocol_options(plan, spec.option_pairs(self))
         return with_protocol_delay(plan)  # Mitsubishi: waiting time and data check time
 
 

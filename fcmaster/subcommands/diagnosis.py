@@ -8,12 +8,13 @@ The probing itself lives in :mod:`fcmaster.subcommands.doctor`.
 from __future__ import annotations
 
 import statistics
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Final
 
 from fcmaster.bus.adapter import LOW_LATENCY_MS, UDEV_FILE, UDEV_RULE, Adapter
 from fcmaster.bus.adapter import max_transactions_per_s as adapter_limit
 from fcmaster.protocol.registry import PROTOCOLS, spec_for
+from fcmaster.protocol.spec import OptionPairs
 
 NOISE_MIN_BYTES: Final = 3  # fewer stray bytes than this are a glitch (a port opening), not noise
 # Answers later than the drives' factory delay by this much (median) are held somewhere: a
@@ -26,25 +27,38 @@ SLOW_BY_S: Final = 0.005
 
 @dataclass(slots=True, frozen=True, kw_only=True)
 class LineFormat:
-    """A protocol and the character format it is spoken in."""
+    """A protocol, the character format it is spoken in and the options the doctor probes."""
 
     protocol: str
     baudrate: int
     parity: str
     stopbits: int
-    address_format: int | None = None  # None: the protocol has no address_format key
+    # The protocol's own line keys the doctor probes (ProtocolSpec.probed_options), as
+    # (key, value) pairs: FC's address format; none for most protocols.
+    protocol_options: OptionPairs = ()
 
     @property
     def character_format(self) -> str:
         """``19200 8E1``."""
         return f"{self.baudrate} 8{self.parity}{self.stopbits}"
 
-    def text(self) -> str:
-        """``<protocol> 19200 8E1`` (and the address format where the protocol has one)."""
-        fmt = f"{self.protocol} {self.baudrate} 8{self.parity}{self.stopbits}"
-        return (
-            fmt if self.address_format is None else f"{fmt}, address format {self.address_format}"
+    def value(self, key: str) -> object:
+        """The value of the config key ``key`` (``baudrate``, ``address_format``)."""
+        options = dict(self.protocol_options)
+        return options[key] if key in options else getattr(self, key)
+
+    def with_options(self, pairs: OptionPairs) -> LineFormat:
+        """The same format with ``pairs`` in place of the options of the same names."""
+        names = {name for name, _ in pairs}
+        return replace(
+            self,
+            protocol_options=(*(p for p in self.protocol_options if p[0] not in names), *pairs),
         )
+
+    def text(self) -> str:
+        """``<protocol> 19200 8E1`` (and the probed options: ``, address format 126``)."""
+        fmt = f"{self.protocol} {self.baudrate} 8{self.parity}{self.stopbits}"
+        return fmt + "".join(f", {name.replace('_', ' ')} {v}" for name, v in self.protocol_options)
 
     def to_json(self) -> dict[str, Any]:
         """As the config's bus keys name them."""
@@ -54,8 +68,7 @@ class LineFormat:
             "parity": self.parity,
             "stopbits": self.stopbits,
         }
-        if self.address_format is not None:
-            out["address_format"] = self.address_format
+        out.update(self.protocol_options)
         return out
 
 
@@ -117,7 +130,9 @@ class Survey:
     turnarounds_s: list[float] = field(default_factory=list)  # request end → reply end, less wire
     adapter: Adapter | None = None
     expected: Expected | None = None
-    only_format_31: bool = False  # FC drives answered in the 31 format and not in 126
+    # The drives answered only with these options (one of the spec's fallback_options),
+    # not with their defaults: () when they answered at the defaults
+    only_options: OptionPairs = ()
     settings_probed: bool = True  # False: a socket:// converter, whose own settings apply
 
     @property
@@ -137,7 +152,9 @@ class Survey:
 class Finding:
     """One thing to fix: a code for scripts, what is wrong, and what to do."""
 
-    code: str  # no_answer, settings, address_format, echo, no_echo, duplicate_address, …
+    # no_answer, settings, echo, no_echo, duplicate_address, …, or the line key a drive
+    # answers only to a fallback value of (address_format)
+    code: str
     message: str
     fix: str
     data: dict[str, Any] = field(default_factory=dict)
@@ -181,12 +198,13 @@ def _settings(survey: Survey, found: LineFormat) -> list[Finding]:
     if expected is not None:
         want = expected.line
         keys = ("protocol", "baudrate", "parity")
-        differ = [k for k in keys if getattr(found, k) != getattr(want, k)]
-        if found.address_format is not None and want.address_format != found.address_format:
-            differ.append("address_format")
+        differ = [k for k in keys if found.value(k) != want.value(k)]
+        # the probed options, when the config's protocol is the one found
+        mine = dict(want.protocol_options) if want.protocol == found.protocol else {}
+        differ += [k for k, v in found.protocol_options if k in mine and mine[k] != v]
         if differ:
-            said = ", ".join(f"{k} {getattr(want, k)}" for k in differ)
-            sets = ", ".join(f"{k}: {getattr(found, k)}" for k in differ)
+            said = ", ".join(f"{k} {want.value(k)}" for k in differ)
+            sets = ", ".join(f"{k}: {found.value(k)}" for k in differ)
             findings.append(
                 Finding(
                     "settings",
@@ -197,12 +215,16 @@ def _settings(survey: Survey, found: LineFormat) -> list[Finding]:
                 )
             )
             return findings
-    if survey.only_format_31 and (expected is None or expected.line.address_format != 31):
+    only = survey.only_options
+    if only and (expected is None or not set(only) <= set(expected.line.protocol_options)):
+        named = ", ".join(f"{k} {v}" for k, v in only)
+        sets = ", ".join(f"{k}: {v}" for k, v in only)
+        flags = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in only)
         findings.append(
             Finding(
-                "address_format",
-                "the drives answer only in the 31 address format",
-                "set address_format: 31 (or --address-format 31)",
+                "_".join(k for k, _ in only),
+                f"the drives answer only with {named}, not with the default",
+                f"set {sets} (or {flags})",
             )
         )
     return findings

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Final
 
 from fcmaster.bus.codecs import PROTOCOLS, codec_for, with_protocol_delay
-from fcmaster.bus.plan import LinePlan
+from fcmaster.bus.plan import LinePlan, with_protocol_options
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock, MonotonicClock
@@ -187,9 +187,10 @@ def _serial(plan: LinePlan) -> Transport:
 def _plan(port: str, fmt: LineFormat, timeout_s: float | None) -> LinePlan:
     plan = LinePlan(
         name="doctor", port=port, protocol=fmt.protocol, baudrate=fmt.baudrate,
-        parity=fmt.parity, stopbits=fmt.stopbits, address_format=fmt.address_format or 126,
-        timeout_s=timeout_s,
+        parity=fmt.parity, stopbits=fmt.stopbits, timeout_s=timeout_s,
     )  # fmt: skip
+    spec = spec_for(fmt.protocol)  # its defaults, then the probed options the format has
+    plan = with_protocol_options(plan, spec.option_pairs(fmt))
     plan = with_protocol_delay(plan)
     if timeout_s is None:
         codec = codec_for(plan)
@@ -211,18 +212,18 @@ def settings_to_try(
         spec = spec_for(protocol)
         baudrate, parity, stopbits = (spec.factory.baudrate, spec.factory.parity,
                                       spec.factory.stopbits)  # fmt: skip
-        address_format = 126 if spec.owns_key("address_format") else None
+        options = spec.probed_options()  # their defaults; the fallbacks are tried in examine
         if not probe_format:
             if fixed is not None and fixed.line.protocol == protocol:
                 yield fixed.line
             else:
                 yield LineFormat(protocol=protocol, baudrate=baudrate, parity=parity,
-                                 stopbits=stopbits, address_format=address_format)  # fmt: skip
+                                 stopbits=stopbits, protocol_options=options)  # fmt: skip
             continue
         for baudrate in spec.baudrates:
             for parity in spec.parities:
                 yield LineFormat(protocol=protocol, baudrate=baudrate, parity=parity,
-                                 stopbits=stopbits, address_format=address_format)  # fmt: skip
+                                 stopbits=stopbits, protocol_options=options)  # fmt: skip
 
 
 async def examine(
@@ -270,13 +271,8 @@ async def examine(
             asked = _probe_list(prober.codec, probe, addresses)
             if await _anyone(prober, asked):
                 survey.found = fmt
-            elif fmt.address_format == 126:  # drives that know only the 31 format?
-                fmt31, heard_until = _format31(fmt), prober.quiet_at
-                prober = _Prober(_plan(port, fmt31, timeout_s), transport, survey, clock)
-                prober.quiet_at = heard_until  # the same line: the pause still holds
-                asked31 = [a for a in asked if a in prober.codec.addresses][:1]
-                if await _anyone(prober, asked31):
-                    survey.found, survey.only_format_31 = fmt31, True
+            else:  # drives that answer only to other options of their protocol's?
+                prober = await _fallbacks(prober, fmt, asked, timeout_s)
             if survey.found is not None:
                 await _scan(prober, addresses, survey, note)  # the prober that heard them
                 return survey
@@ -287,9 +283,26 @@ async def examine(
     return survey
 
 
-def _format31(fmt: LineFormat) -> LineFormat:
-    return LineFormat(protocol=fmt.protocol, baudrate=fmt.baudrate, parity=fmt.parity,
-                      stopbits=fmt.stopbits, address_format=31)  # fmt: skip
+async def _fallbacks(
+    prober: _Prober, fmt: LineFormat, asked: list[int], timeout_s: float | None
+) -> _Prober:
+    """Ask one address again with each of the protocol's fallback options, in order.
+
+    Where drives answer, the survey records the format found and the options they needed;
+    the prober returned is the one that heard them (or the last one asking).
+    """
+    survey = prober.survey
+    for pairs in spec_for(fmt.protocol).fallback_options:
+        if set(pairs) <= set(fmt.protocol_options):
+            continue  # what was just asked
+        other, heard_until = fmt.with_options(pairs), prober.quiet_at
+        plan = _plan(prober.plan.port, other, timeout_s)
+        prober = _Prober(plan, prober.transport, survey, prober.clock)
+        prober.quiet_at = heard_until  # the same line: the pause still holds
+        if await _anyone(prober, [a for a in asked if a in prober.codec.addresses][:1]):
+            survey.found, survey.only_options = other, pairs
+            break
+    return prober
 
 
 def _probe_list(
@@ -344,11 +357,7 @@ def expected_from_config(config: Path, port: str) -> Expected:
             fmt = LineFormat(
                 protocol=plan.protocol, baudrate=plan.baudrate, parity=plan.parity,
                 stopbits=plan.stopbits,
-                address_format=(
-                    plan.address_format
-                    if spec_for(plan.protocol).owns_key("address_format")
-                    else None
-                ),
+                protocol_options=spec_for(plan.protocol).probed_options(plan),
             )  # fmt: skip
             return Expected(bus=plan.name, line=fmt, echo=plan.echo,
                             addresses=[d.address for d in plan.drives])  # fmt: skip

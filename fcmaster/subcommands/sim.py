@@ -58,7 +58,7 @@ async def run(args: argparse.Namespace) -> int:
         parity=args.parity,
         stopbits=args.stopbits,
         faults=parse_faults(args.faults),
-        **simulated_keys(args),  # the protocols' options the simulated drives take
+        protocol_options=simulated_keys(args.protocol, args),  # the options the drives take
         adapter_latency_ms=args.adapter_latency_ms,
         duplicate_addresses=args.duplicate_addresses,
     )

@@ -54,7 +54,12 @@ async def test_scan_in_address_format_31_tries_1_to_31_by_default() -> None:
 
 
 async def test_scan_of_enc_drives_with_decimal_addresses_tries_1_to_99_by_default() -> None:
-    line = LineSettings(protocol="enc", baudrate=38400, parity="N", address_encoding="decimal")
+    line = LineSettings(
+        protocol="enc",
+        baudrate=38400,
+        parity="N",
+        protocol_options=(("address_encoding", "decimal"),),
+    )
     async with commissioning.served(line, [(99, DriveSettings(response_delay_s=0.005))]) as server:
         code, out, err = await commissioning.fcmaster(
             server, "enc", "scan", "--baudrate", "38400", "--parity", "N",

@@ -33,7 +33,11 @@ async def test_drives_at_odd_parity_are_found_after_even_and_the_config_told() -
     config = Expected(
         bus="north",
         line=LineFormat(
-            protocol="danfoss-fc", baudrate=115200, parity="E", stopbits=1, address_format=126
+            protocol="danfoss-fc",
+            baudrate=115200,
+            parity="E",
+            stopbits=1,
+            protocol_options=(("address_format", 126),),
         ),
         echo=False,
     )

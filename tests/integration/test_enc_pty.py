@@ -34,6 +34,7 @@ from tests.orders import orders
 LIMIT_S = 30.0
 ADDRESSES = (1, 2, 3)
 BAUDRATE = 19200
+ENCODED = ("address", "response", "fault")  # the ENC line keys <what>_encoding
 RAMPS = {"F0.08": 1.0, "F0.09": 1.0}  # 0 to 50 Hz in a second, so tests need not wait long
 
 
@@ -66,7 +67,7 @@ async def enc_line(
     line = build_line(
         LineSettings(
             protocol="enc", baudrate=BAUDRATE, parity="N", faults=faults or FaultPlan(),
-            address_encoding=encoding, response_encoding=encoding, fault_encoding=encoding,
+            protocol_options=tuple((f"{n}_encoding", encoding) for n in ENCODED),
         ),
         [
             (a, own.get(a, DriveSettings(response_delay_s=0.005, parameters=RAMPS)))

@@ -16,7 +16,7 @@ from fcmaster.subcommands.diagnosis import (
 )
 
 FC_19200 = LineFormat(protocol="danfoss-fc", baudrate=19200, parity="E", stopbits=1,
-                      address_format=126)  # fmt: skip
+                      protocol_options=(("address_format", 126),))  # fmt: skip
 
 
 def answering(*addresses: int) -> list[AddressReport]:
@@ -40,7 +40,7 @@ def codes(survey: Survey) -> list[str]:
 
 def expected(**line: object) -> Expected:
     fields = {"protocol": "danfoss-fc", "baudrate": 19200, "parity": "E", "stopbits": 1,
-              "address_format": 126, **line}  # fmt: skip
+              "protocol_options": (("address_format", 126),), **line}  # fmt: skip
     return Expected(bus="north", line=LineFormat(**fields), echo=False)  # type: ignore[arg-type]
 
 
@@ -82,7 +82,7 @@ def test_parity_and_protocol_differences_are_named_together() -> None:
     # A pty cannot carry parity, so this is the only place a parity mismatch is rehearsed
     # end to end in words; the search for it is tested in-process in test_doctor_search.
     found = LineFormat(protocol="danfoss-fc", baudrate=19200, parity="O", stopbits=1,
-                       address_format=126)  # fmt: skip
+                       protocol_options=(("address_format", 126),))  # fmt: skip
     survey = healthy(found=found, expected=expected(parity="E"))
     [finding] = diagnose(survey)
     assert finding.fix == "set parity: O on bus north"
@@ -93,13 +93,15 @@ def test_parity_and_protocol_differences_are_named_together() -> None:
 
 def test_drives_that_know_only_the_31_format() -> None:
     found = LineFormat(protocol="danfoss-fc", baudrate=9600, parity="E", stopbits=1,
-                       address_format=31)  # fmt: skip
-    assert codes(healthy(found=found, only_format_31=True)) == ["address_format"]
-    [finding] = diagnose(healthy(found=found, only_format_31=True))
+                       protocol_options=(("address_format", 31),))  # fmt: skip
+    assert codes(healthy(found=found, only_options=(("address_format", 31),))) == ["address_format"]
+    [finding] = diagnose(healthy(found=found, only_options=(("address_format", 31),)))
     assert "address_format: 31" in finding.fix
     # A config that says 9600 and format 126 gets one settings finding naming both keys.
     [finding] = diagnose(
-        healthy(found=found, only_format_31=True, expected=expected(baudrate=9600))
+        healthy(
+            found=found, only_options=(("address_format", 31),), expected=expected(baudrate=9600)
+        )
     )
     assert finding.fix == "set address_format: 31 on bus north"
 

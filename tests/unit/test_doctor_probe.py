@@ -151,9 +151,9 @@ async def test_drives_that_answer_only_the_31_address_format() -> None:
         return reply(1, AddressFormat.FORMAT_31)
 
     survey, _ = await doctor(at(115200, "E", old_drives))
-    assert survey.only_format_31
+    assert survey.only_options == (("address_format", 31),)
     assert survey.found is not None
-    assert survey.found.address_format == 31
+    assert survey.found.value("address_format") == 31
     assert survey.drives == [1]
 
 

@@ -69,4 +69,6 @@ SPEC: Final[ProtocolSpec[FcOptions]] = ProtocolSpec(
     link_type=147,  # pcapng USER0
     simulator="fcmaster.sim.danfoss_fc.simulator:SIMULATOR",
     watchdog=WATCHDOG,
+    # Older drives (and some gateways) know only the 1-31 address format and ignore 126's.
+    fallback_options=((("address_format", 31),),),
 )

@@ -46,6 +46,7 @@ from fcmaster.protocol.enc.frame import (
     split_frame,
 )
 from fcmaster.protocol.enc.framer import EncFramer
+from fcmaster.protocol.enc.spec import SPEC
 from fcmaster.protocol.framing import Frame, Skipped, SkipReason
 from fcmaster.sim.enc.control import EncControl
 from fcmaster.sim.enc.parameters import (
@@ -110,9 +111,10 @@ class EncSimDrive:
         """
         settings = settings or DriveSettings()
         line = line or LineSettings(protocol="enc")
-        self._address_encoding = NumberEncoding(line.address_encoding)
-        self._response_encoding = NumberEncoding(line.response_encoding)
-        self._fault_encoding = NumberEncoding(line.fault_encoding)
+        options = SPEC.options_of(line)  # the line's encodings, defaults where it names none
+        self._address_encoding = NumberEncoding(options.address_encoding)
+        self._response_encoding = NumberEncoding(options.response_encoding)
+        self._fault_encoding = NumberEncoding(options.fault_encoding)
         overrides = {LOCAL_ADDRESS: address}
         if line.baudrate in BAUD_OPTIONS and line.stopbits == 1:
             overrides[COMMUNICATION] = PARITY_OPTIONS[line.parity] * 10 + BAUD_OPTIONS.index(

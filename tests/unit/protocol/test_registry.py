@@ -11,13 +11,14 @@ import pytest
 
 import fcmaster
 from fcmaster.bus.plan import LinePlan
-from fcmaster.cli import build_parser
+from fcmaster.cli import build_parser, main
 from fcmaster.config import BusModel, parse
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.protocol.registry import DEFAULT, NAMES, PROTOCOLS, line_keys, spec_for
-from fcmaster.protocol.spec import LineKey
+from fcmaster.protocol.spec import KeyValue, LineKey
 from fcmaster.sim.build import SIM_PROTOCOLS
 from fcmaster.sim.settings import LineSettings
+from fcmaster.subcommands import commission
 from fcmaster.subcommands.commission import LineOptions
 
 PACKAGE = Path(fcmaster.__file__).parent
@@ -42,12 +43,16 @@ def test_an_unknown_protocol_is_refused_with_the_known_ones() -> None:
     ("options", "first", "last"),
     [
         pytest.param(LineOptions(port="p"), 1, 126, id="fc-126"),
-        pytest.param(LineOptions(port="p", address_format=31), 1, 31, id="fc-31"),
+        pytest.param(
+            LineOptions(port="p", protocol_options=(("address_format", 31),)), 1, 31, id="fc-31"
+        ),
         pytest.param(LineOptions(port="p", protocol="mitsubishi"), 0, 31, id="mitsubishi"),
         pytest.param(LineOptions(port="p", protocol="enc"), 1, 126, id="enc-hex"),
         pytest.param(
-            LineOptions(port="p", protocol="enc", address_encoding="decimal"), 1, 99,
-            id="enc-decimal",
+            LineOptions(
+                port="p", protocol="enc", protocol_options=(("address_encoding", "decimal"),)
+            ),
+            1, 99, id="enc-decimal",
         ),
     ],
 )  # fmt: skip
@@ -62,7 +67,8 @@ def test_scan_by_default_tries_the_addresses_the_spec_gives_for_the_line(
 
 def test_a_source_without_a_key_takes_its_default() -> None:
     enc = spec_for("enc")
-    assert enc.addresses(LineSettings(protocol="enc", address_encoding="decimal")) == range(1, 100)
+    decimal = LineSettings(protocol="enc", protocol_options=(("address_encoding", "decimal"),))
+    assert enc.addresses(decimal) == range(1, 100)
     assert spec_for("danfoss-fc").addresses(LineSettings()) == range(1, 127)  # no format there
 
 
@@ -78,18 +84,19 @@ def test_factory_settings_fill_what_the_command_line_leaves_out() -> None:
 
 def test_every_line_key_is_a_config_key_and_a_cli_option_with_its_default() -> None:
     scan = build_parser().parse_args(["scan", "--port", "p"])
-    option_fields = {f.name for f in dataclasses.fields(LineOptions)}
     for key, spec in line_keys():
         assert key.name in BusModel.model_fields, key.name
         assert BusModel.model_fields[key.name].default == key.default
         assert getattr(scan, key.name) == key.default, key.name
-        assert key.name in option_fields, key.name  # what the CLI hands commissioning
         assert key.name in {f.name for f in dataclasses.fields(spec.options)}  # type: ignore[arg-type]
-        if key.simulated:
-            assert key.name in {f.name for f in dataclasses.fields(LineSettings)}
+        if key.simulated:  # the simulated line carries it with no field of its own
+            assert key.name not in {f.name for f in dataclasses.fields(LineSettings)}
+            value = _other_value(key)
+            line = LineSettings(protocol=spec.name, protocol_options=((key.name, value),))
+            assert getattr(spec.options_of(line), key.name) == value
 
 
-def _other_value(key: LineKey) -> object:
+def _other_value(key: LineKey) -> KeyValue:
     if key.choices:
         return next(c for c in key.choices if c != key.default)
     return key.maximum
@@ -109,6 +116,36 @@ def test_a_line_key_in_the_config_reaches_the_codec_options(key: LineKey, name: 
     """
     (plan,) = parse(textwrap.dedent(text), env={}).lines
     assert getattr(spec_for(name).options_of(plan), key.name) == value
+
+
+@pytest.mark.parametrize(
+    ("key", "name"), [(k, s.name) for k, s in line_keys()], ids=[k.name for k, _ in line_keys()]
+)
+def test_a_line_key_on_the_command_line_reaches_the_commissioning_codec(
+    key: LineKey, name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # No field of LineOptions names the key: the CLI hands it over as one of the protocol's
+    # options, and the plan commissioning opens the port with carries it to the codec.
+    given: list[LineOptions] = []
+
+    async def scan(options: LineOptions, addresses: object, *, as_json: bool) -> int:
+        given.append(options)
+        return 0
+
+    monkeypatch.setattr(commission, "scan", scan)
+    value = _other_value(key)
+    flag = "--" + key.name.replace("_", "-")
+    assert main(["scan", "--port", "p", "--protocol", name, flag, str(value)]) == 0
+    (options,) = given
+    assert getattr(spec_for(name).options_of(options.plan()), key.name) == value
+    assert key.name not in {f.name for f in dataclasses.fields(LineOptions)}
+
+
+def test_commissioning_refuses_options_its_protocol_does_not_have() -> None:
+    with pytest.raises(UsageError, match="enc lines have no address_format"):
+        LineOptions(port="p", protocol="enc", protocol_options=(("address_format", 31),))
+    with pytest.raises(UsageError, match="address_format 32 is not 31 or 126"):
+        LineOptions(port="p", protocol_options=(("address_format", 32),))
 
 
 def test_a_plan_carries_keys_it_has_no_field_for_to_the_spec() -> None:
