@@ -3,7 +3,7 @@
 Theory of operation
 -------------------
 A ``control: bus`` drive is fed a control word in every exchange, so its own communication
-watchdog (FC 8-03/8-04, Mitsubishi Pr.122, ENC F2.16) is what stops the motor when the
+watchdog (FC 8-03/8-04, Mitsubishi Pr.122 or Pr.336, ENC F2.16) is what stops the motor when the
 gateway dies. Each time such a drive comes online (first adoption, after a demotion, after
 the line was down: it may have been replaced meanwhile), :class:`WatchdogAudit` reads those
 parameters through the line's ordinary command queue — reads like any other, served
@@ -31,7 +31,8 @@ reports, never of what was asked. A drive that already has the setting is not wr
 a gateway that restarts often does not wear the drive's memory.
 
 The vendor facts live in each protocol package's ``watchdog`` module, and reach the audit
-through the protocol's spec (``ProtocolSpec.watchdog``).
+through the protocol's spec (``ProtocolSpec.watchdog_of`` the line: Mitsubishi's depend on
+the port the drives are wired to).
 """
 
 from __future__ import annotations
@@ -131,7 +132,7 @@ class WatchdogAudit:
         self.plan = plan
         self._clock = clock
         self._turn = asyncio.Lock()  # one audit exchange at a time on the line
-        self.facts = spec_for(plan.protocol).watchdog
+        self.facts = spec_for(plan.protocol).watchdog_of(plan)  # Mitsubishi: by drive_port
         self.round_s = poll_round_s(plan)[0] if plan.drives else 0.0
         self._report = report
         self._execute: Execute | None = None

@@ -140,6 +140,9 @@ class ProtocolSpec(Generic[OptionsT]):
     link_type: int  # its pcapng link type in captures (a private USER type, 147-162)
     # The drive's communication watchdog: its parameters, their values, what counts as off
     watchdog: WatchdogFacts
+    # The watchdog facts of a line with these options where they depend on them (Mitsubishi:
+    # the port the drives are wired to); None: ``watchdog`` on every line.
+    watchdog_for: Callable[[OptionsT], WatchdogFacts] | None = None
 
     def options_of(self, source: object = None) -> OptionsT:
         """This protocol's options as ``source`` has them.
@@ -179,6 +182,12 @@ class ProtocolSpec(Generic[OptionsT]):
         reason = f"{address} is outside {addresses.start}-{addresses.stop - 1}"
         hint = self.address_hint(self.options_of(source), address)
         return f"{reason}: {hint}" if hint else reason
+
+    def watchdog_of(self, source: object = None) -> WatchdogFacts:
+        """The drives' watchdog facts on a line with ``source``'s options."""
+        if self.watchdog_for is None:
+            return self.watchdog
+        return self.watchdog_for(self.options_of(source))
 
     def owns_key(self, name: str) -> bool:
         """Whether ``name`` is one of this protocol's own line keys."""

@@ -96,7 +96,7 @@ def sim_settings(
     line = LineSettings(
         name=plan.name, protocol=plan.protocol, baudrate=plan.baudrate, parity=plan.parity,
         stopbits=plan.stopbits, databits=plan.databits, faults=faults,
-        **simulated_keys(plan),
+        protocol_options=plan.protocol_options, **simulated_keys(plan),
     )  # fmt: skip
     if "adapter_latency_ms" in simulation:
         try:

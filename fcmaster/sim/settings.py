@@ -80,6 +80,8 @@ class LineSettings:
     adapter_latency_ms: float | None = None
     # repeated addresses are drives that both answer (a replaced drive left at the old one's)
     duplicate_addresses: bool = False
+    # the protocol's other line keys, as a LinePlan keeps them (Mitsubishi: drive_port)
+    protocol_options: tuple[tuple[str, int | str | None], ...] = ()
 
     def __post_init__(self) -> None:
         if self.adapter_latency_ms is not None and not 0 < self.adapter_latency_ms <= 255:

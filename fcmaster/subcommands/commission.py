@@ -51,6 +51,7 @@ class LineOptions:
     address_encoding: str = "hex"  # enc only, as the line's config keys
     response_encoding: str = "hex"
     fault_encoding: str = "hex"
+    drive_port: str = "pu"  # mitsubishi only: pu | terminals (whose watchdog: Pr.122 | Pr.336)
 
     def plan(self, drives: tuple[DrivePlan, ...] = ()) -> LinePlan:
         """A line plan with the protocol's factory settings where nothing was given."""
@@ -71,6 +72,7 @@ class LineOptions:
             fault_encoding=self.fault_encoding,
             retries=1,
             drives=drives,
+            protocol_options=(("drive_port", self.drive_port),),
         )
         return with_protocol_delay(plan)  # Mitsubishi: waiting time and data check time
 
