@@ -28,7 +28,11 @@ carries what they read. ``off`` and ``too_short`` are logged as warnings with th
 words. A drive configured with ``watchdog: {timeout_s, action}`` whose setting differs is
 written (timeout first) and read back; the verdict is always that of what the drive
 reports, never of what was asked. A drive that already has the setting is not written, so
-a gateway that restarts often does not wear the drive's memory.
+a gateway that restarts often does not wear the drive's memory. A write the drive refuses
+(Mitsubishi and ENC drives refuse parameter writes while running) is tried again once the
+drive is seen stopped: at most once per stop, so a drive that keeps refusing is asked again
+only after it has run and stopped anew. Only while such a retry waits does the audit look at
+the drive's replies (its status word); otherwise replies never pass through it.
 
 The vendor facts live in each protocol package's ``watchdog`` module, and reach the audit
 through the protocol's spec (``ProtocolSpec.watchdog_of`` the line: Mitsubishi's depend on
@@ -52,6 +56,8 @@ from fcmaster.bus.master import BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, WatchdogPlan
 from fcmaster.bus.poll_round import poll_round_s
 from fcmaster.clock import Clock
+from fcmaster.protocol.codec import Reply
+from fcmaster.protocol.drive import ControlIntent
 from fcmaster.protocol.registry import spec_for
 from fcmaster.protocol.watchdog import WatchdogFacts, WatchdogSetting
 
@@ -139,6 +145,10 @@ class WatchdogAudit:
         self._tasks: dict[str, asyncio.Task[None]] = {}
         self._stopped = False
         self._log = log.bind(bus=plan.name)
+        self._observer: _AuditingObserver | None = None
+        # drives whose refused write waits for a stop: name → (the stop seen, wait for a run
+        # first); while any waits, the observer shows the audit the replies
+        self._stop_waits: dict[str, tuple[asyncio.Future[None], bool]] = {}
 
     def attach(self, execute: Execute) -> None:
         """Send the audit's reads and writes through ``execute`` (the line's BusMaster)."""
@@ -146,7 +156,8 @@ class WatchdogAudit:
 
     def observing(self, inner: BusObserver) -> BusObserver:
         """``inner``, with this audit told when a drive comes online."""
-        return _AuditingObserver(inner, self)
+        self._observer = _AuditingObserver(inner, self)
+        return self._observer
 
     def drive_online(self, drive: DrivePlan) -> None:
         """``drive`` answers again: audit it (again), ending an audit still under way."""
@@ -203,10 +214,80 @@ class WatchdogAudit:
                 values, problem = await self._read(drive, facts)
                 if values is None and problem is None:
                     return
+                if written is Outcome.REFUSED:
+                    self._verdict(drive, facts, values, problem)  # what it has meanwhile
+                    await self._retry_when_stopped(drive, wanted, writes)
+                    return
+        self._verdict(drive, facts, values, problem)
+
+    def _verdict(
+        self,
+        drive: DrivePlan,
+        facts: WatchdogFacts,
+        values: list[float] | None,
+        problem: str | None,
+    ) -> None:
         if values is None:
             self._finish(drive, None, problem)
+        else:
+            self._finish(drive, facts.decode(values), None)
+
+    async def _retry_when_stopped(
+        self, drive: DrivePlan, wanted: WatchdogPlan, writes: tuple[tuple[str, float], ...]
+    ) -> None:
+        """Write again once the drive is seen stopped; again refused: after its next stop."""
+        facts = self.facts
+        assert facts is not None
+        run_first = False  # the first retry: at the first stopped status, even if it is now
+        while True:
+            await self._seen_stopped(drive.name, run_first=run_first)
+            self._log.info(
+                "drive.watchdog_write_retried",
+                drive=drive.name,
+                reason="the drive refused the write, and is now seen stopped",
+                wanted_timeout_s=wanted.timeout_s,
+                wanted_action=wanted.action,
+            )
+            written = await self._write(drive, wanted, writes)
+            if written is None:
+                return
+            if written is Outcome.REFUSED:  # its setting is as last reported: no new verdict
+                run_first = True  # at most once per stop: next after a run and a stop
+                continue
+            values, problem = await self._read(drive, facts)
+            if values is not None or problem is not None:
+                self._verdict(drive, facts, values, problem)
             return
-        self._finish(drive, facts.decode(values), None)
+
+    async def _seen_stopped(self, name: str, *, run_first: bool) -> None:
+        """Until a reply of ``name`` shows it stopped (after one showing it running)."""
+        seen: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._stop_waits[name] = (seen, run_first)
+        self._watch_replies()
+        try:
+            await seen
+        finally:  # seen, or the audit ended (shutdown, the drive came online again)
+            if self._stop_waits.get(name, (None,))[0] is seen:
+                del self._stop_waits[name]
+            self._watch_replies()
+
+    def _watch_replies(self) -> None:
+        """Let the replies through the audit only while a retry waits for a stop."""
+        if self._observer is not None:
+            self._observer.watch(bool(self._stop_waits))
+
+    def drive_replied(self, drive: DrivePlan, reply: Reply) -> None:
+        """A reply while retries wait: a drive seen stopped gets its write again."""
+        wait = self._stop_waits.get(drive.name)
+        status = reply.status
+        if wait is None or status is None:
+            return
+        seen, run_first = wait
+        if status.running:
+            if run_first:
+                self._stop_waits[drive.name] = (seen, False)
+        elif not run_first and not seen.done():
+            seen.set_result(None)
 
     async def _exchange(self, name: str, command: Command) -> CommandResult:
         """Carry out ``command``, then rest, keeping the audit to its share of the line."""
@@ -241,8 +322,8 @@ class WatchdogAudit:
 
     async def _write(
         self, drive: DrivePlan, wanted: WatchdogPlan, writes: tuple[tuple[str, float], ...]
-    ) -> bool | None:
-        """Write the configured setting; whether every write was done (None: line gone)."""
+    ) -> Outcome | None:
+        """Write the configured setting: DONE, or the first write's failure (None: line gone)."""
         for parameter, value in writes:
             command = Command(
                 action=Action.WRITE, parameter=parameter, value=value, persist=True, actor=ACTOR
@@ -260,15 +341,18 @@ class WatchdogAudit:
                     reason=result.reason or None,
                     wanted_timeout_s=wanted.timeout_s,
                     wanted_action=wanted.action,
+                    retry="once the drive is seen stopped"
+                    if result.outcome is Outcome.REFUSED
+                    else None,
                 )
-                return False
+                return result.outcome
         self._log.info(
             "drive.watchdog_written",
             drive=drive.name,
             timeout_s=wanted.timeout_s,
             action=wanted.action,
         )
-        return True
+        return Outcome.DONE
 
     def _finish(
         self, drive: DrivePlan, setting: WatchdogSetting | None, problem: str | None
@@ -324,15 +408,26 @@ class _AuditingObserver:
     """A line's observer, with the audit told of drives coming online.
 
     Only availability goes through here; the other calls are the inner observer's own
-    bound methods, so a reply costs nothing more than before.
+    bound methods, so a reply costs nothing more than before — except while a refused write
+    waits for its drive to stop (:meth:`watch`), when replies pass the audit too.
     """
 
     def __init__(self, inner: BusObserver, audit: WatchdogAudit) -> None:
         self._inner = inner
         self._audit = audit
-        self.drive_replied = inner.drive_replied
+        self.drive_replied: Callable[..., None] = inner.drive_replied
         self.line_availability = inner.line_availability
         self.command_completed = inner.command_completed
+
+    def watch(self, on: bool) -> None:
+        """Show the audit each reply (``on``), or only the inner observer (the usual)."""
+        self.drive_replied = self._replied_watched if on else self._inner.drive_replied
+
+    def _replied_watched(
+        self, bus: str, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
+    ) -> None:
+        self._inner.drive_replied(bus, drive, reply, at, commanded)
+        self._audit.drive_replied(drive, reply)
 
     def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
         """Pass it on; a drive that came online is audited."""
