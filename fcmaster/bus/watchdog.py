@@ -146,6 +146,8 @@ class WatchdogAudit:
         self._stopped = False
         self._log = log.bind(bus=plan.name)
         self._observer: _AuditingObserver | None = None
+        self._warned: dict[str, WatchdogReport] = {}  # the warning each drive last had
+        self._offline: set[str] = set()  # drives that went offline since they last answered
         # drives whose refused write waits for a stop: name → (the stop seen, wait for a run
         # first); while any waits, the observer shows the audit the replies
         self._stop_waits: dict[str, tuple[asyncio.Future[None], bool]] = {}
@@ -161,6 +163,7 @@ class WatchdogAudit:
 
     def drive_online(self, drive: DrivePlan) -> None:
         """``drive`` answers again: audit it (again), ending an audit still under way."""
+        self._offline.discard(drive.name)
         if not drive.control or self._execute is None or self._stopped:
             return
         running = self._tasks.pop(drive.name, None)
@@ -171,6 +174,14 @@ class WatchdogAudit:
         )
         self._tasks[drive.name] = task
         task.add_done_callback(partial(self._done, drive.name))
+
+    def drive_offline(self, drive: DrivePlan) -> None:
+        """``drive`` stopped answering: what its audit then fails to read judges nothing.
+
+        Reads that failed because the drive lost power are no verdict on its watchdog, so
+        the verdict it had stays until the drive answers again and is audited anew.
+        """
+        self._offline.add(drive.name)
 
     def stop(self) -> None:
         """Shutdown begins: nothing more goes out for the audit, whatever comes online."""
@@ -308,8 +319,10 @@ class WatchdogAudit:
         for parameter in facts.parameters:
             command = Command(action=Action.READ, parameter=parameter, actor=ACTOR, internal=True)
             result = await self._exchange(drive.name, command)
-            if result.outcome is Outcome.CANCELLED:
-                return None, None
+            if result.outcome is Outcome.CANCELLED or (
+                not result.ok and drive.name in self._offline
+            ):
+                return None, None  # the line or the drive is gone: its return audits again
             value = result.value
             if result.outcome is not Outcome.DONE or value is None:
                 return None, f"{parameter} could not be read ({result.outcome.value}: " + (
@@ -329,7 +342,9 @@ class WatchdogAudit:
                 action=Action.WRITE, parameter=parameter, value=value, persist=True, actor=ACTOR
             )
             result = await self._exchange(drive.name, command)
-            if result.outcome is Outcome.CANCELLED:
+            if result.outcome is Outcome.CANCELLED or (
+                not result.ok and drive.name in self._offline
+            ):
                 return None
             if result.outcome is not Outcome.DONE:
                 self._log.warning(
@@ -379,7 +394,10 @@ class WatchdogAudit:
             "action": setting.action,
             "poll_round_s": round_s,
         }
-        if verdict is Verdict.OFF:
+        if self._warned.get(drive.name) == report:
+            # The same again (a drive that comes and goes): said once, not at every return.
+            self._log.info("drive.watchdog_unchanged", **fields, verdict=verdict.value)
+        elif verdict is Verdict.OFF:
             self._log.warning(
                 "drive.watchdog_off",
                 **fields,
@@ -401,6 +419,10 @@ class WatchdogAudit:
             )
         else:
             self._log.info("drive.watchdog_checked", **fields, verdict=verdict.value)
+        if verdict in (Verdict.OFF, Verdict.TOO_SHORT):
+            self._warned[drive.name] = report
+        else:
+            self._warned.pop(drive.name, None)
         self._report(self.plan.name, drive.name, report)
 
 
@@ -430,10 +452,12 @@ class _AuditingObserver:
         self._audit.drive_replied(drive, reply)
 
     def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
-        """Pass it on; a drive that came online is audited."""
+        """Pass it on; a drive that came online is audited, one that went offline is not."""
         self._inner.drive_availability(bus, drive, online, at)
         if online:
             self._audit.drive_online(drive)
+        else:
+            self._audit.drive_offline(drive)
 
 
 def _matches(

@@ -357,3 +357,48 @@ async def test_a_refused_write_is_tried_again_once_per_stop_not_in_a_loop() -> N
         "drive.watchdog_write_failed",
     ]
     assert reports == [("a", WatchdogReport(None, "off", Verdict.OFF))]  # one verdict, no repeat
+
+
+async def test_a_drive_that_loses_power_during_its_audit_keeps_its_verdict_until_it_returns() -> (
+    None
+):
+    a = DrivePlan(name="a", address=1, control=True)
+    fc = _drive(1, 20, 2)
+    b, reports, audit = _bench(a, fc=[fc], probe_interval_s=0.5)
+    with structlog.testing.capture_logs() as logs:
+        async with b.master:
+            await b.clock.run_until(T0 + 3.0)
+            assert [r for _, r in reports] == [WatchdogReport(2.0, "stop", Verdict.OK)]
+            fc.silent = True  # powered down …
+            await b.clock.run_until(T0 + 4.0)
+            fc.silent = False  # … back: audited again, and again gone after its first read
+            back = b.clock.now()
+            while not [1 for at, kind, _, _ in _accesses(b, 1) if at > back and kind == "read"]:
+                await b.clock.run_until(b.clock.now() + 0.01)
+            fc.silent = True
+            await b.clock.run_until(T0 + 10.0)
+            assert [r for _, r in reports] == [WatchdogReport(2.0, "stop", Verdict.OK)]
+            fc.silent = False  # back for good: the audit ends with a verdict again
+            await b.clock.run_until(T0 + 14.0)
+            await audit.aclose()
+    # what a powered-down drive did not answer is no verdict: no "unknown" in between
+    assert [r.verdict for _, r in reports] == [Verdict.OK, Verdict.OK]
+    assert not any(e["event"] == "drive.watchdog_unknown" for e in logs)
+
+
+async def test_the_same_warning_is_given_once_not_at_every_return_of_the_drive() -> None:
+    a = DrivePlan(name="a", address=1, control=True)
+    fc = _drive(1, 600, 0)  # factory: Off
+    b, reports, audit = _bench(a, fc=[fc], probe_interval_s=0.5)
+    with structlog.testing.capture_logs() as logs:
+        async with b.master:
+            for start in (3.0, 6.0, 9.0):
+                await b.clock.run_until(T0 + start)
+                fc.silent = True
+                await b.clock.run_until(T0 + start + 1.0)
+                fc.silent = False
+            await b.clock.run_until(T0 + 14.0)
+            await audit.aclose()
+    assert [r.verdict for _, r in reports] == [Verdict.OFF] * 4  # audited at every return
+    events = [e["event"] for e in logs if e["event"].startswith("drive.watchdog_")]
+    assert events == ["drive.watchdog_off"] + ["drive.watchdog_unchanged"] * 3
