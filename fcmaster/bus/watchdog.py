@@ -3,12 +3,12 @@
 Theory of operation
 -------------------
 A ``control: bus`` drive is fed a control word in every exchange, so its own communication
-watchdog (FC 8-03/8-04, Mitsubishi Pr.122 or Pr.336, ENC F2.16) is what stops the motor when the
-gateway dies. Each time such a drive comes online (first adoption, after a demotion, after
-the line was down: it may have been replaced meanwhile), :class:`WatchdogAudit` reads those
-parameters through the line's ordinary command queue — reads like any other, served
-between polls, so polling keeps its pace — and judges the setting against the line's
-worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
+watchdog (FC 8-03/8-04, Mitsubishi Pr.122 or Pr.336, ENC F2.16) is what stops the motor
+when the gateway dies. Each time such a drive comes online (first adoption, after a
+demotion, after the line was down: it may have been replaced meanwhile),
+:class:`WatchdogAudit` reads those parameters through the line's ordinary command queue —
+reads like any other, served between polls, so polling keeps its pace — and judges the
+setting against the line's worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
 
 * ``ok`` — the drive stops (ramp or trip) once it hears nothing for longer than a round;
 * ``off`` — it keeps running if the gateway dies (watchdog off, or an action such as
@@ -25,7 +25,10 @@ drives coming up is audited over a minute or so, while every drive keeps being p
 (and its watchdog fed) at nearly its full rate. The reads are the gateway's own
 housekeeping, like the ramp reads, so they make no audit line; the verdict's log line
 carries what they read. ``off`` and ``too_short`` are logged as warnings with the fix in
-words. A drive configured with ``watchdog: {timeout_s, action}`` whose setting differs is
+words, once per drive: the same again when the drive returns is logged at info. A read
+that fails because the drive went offline judges nothing; its return audits it again.
+
+A drive configured with ``watchdog: {timeout_s, action}`` whose setting differs is
 written (timeout first) and read back; the verdict is always that of what the drive
 reports, never of what was asked. A drive that already has the setting is not written, so
 a gateway that restarts often does not wear the drive's memory. A write the drive refuses
@@ -376,6 +379,7 @@ class WatchdogAudit:
         if setting is None:
             report = WatchdogReport(None, "unknown", Verdict.UNKNOWN)
             self._log.info("drive.watchdog_unknown", drive=drive.name, reason=problem)
+            self._warned.pop(drive.name, None)
             self._report(self.plan.name, drive.name, report)
             return
         verdict = judge(setting, self.round_s)
