@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import os
+import signal
 import sys
 from collections.abc import Callable, Coroutine
 from typing import Any
@@ -24,6 +26,7 @@ __all__ = [
     "DEMO_CONFIG",
     "EXIT_FAILED",
     "EXIT_OK",
+    "EXIT_PIPE_CLOSED",
     "EXIT_USAGE",
     "build_parser",
     "main",
@@ -32,6 +35,9 @@ __all__ = [
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+# The reader of our output left (``fcmaster check | head -1``): the code a shell gives a
+# command that SIGPIPE ended, as for any other tool in a pipeline.
+EXIT_PIPE_CLOSED = 128 + signal.SIGPIPE
 
 
 def _run_async(coro: Coroutine[Any, Any, int]) -> int:
@@ -214,7 +220,12 @@ def main(argv: list[str] | None = None) -> int:
 
         logsetup.configure("warning")  # commissioning tools: only what needs attention
     try:
-        return COMMANDS[args.command](args)
+        code = COMMANDS[args.command](args)
+        sys.stdout.flush()  # a reader that left shows here, not in the interpreter's exit
+        return code
+    except BrokenPipeError:
+        _stdout_closed()
+        return EXIT_PIPE_CLOSED
     except ConfigError as exc:
         print(f"fcmaster {args.command}: invalid configuration", file=sys.stderr)
         for path, reason in exc.problems:
@@ -228,3 +239,16 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_FAILED
     except KeyboardInterrupt:
         return 130
+
+
+def _stdout_closed() -> None:
+    """Quietly drop what is left for a stdout nobody reads.
+
+    What is still buffered would fail again when the interpreter flushes at exit and print
+    a traceback there; stdout now writes to the null device instead.
+    """
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    finally:
+        os.close(devnull)

@@ -33,6 +33,8 @@ def watchdog_plan(
     """A drive's ``watchdog`` as a plan; its problems, each at its key, into ``problems``."""
     if wanted is None:
         return None
+    # The protocol's facts for any line: where they depend on a line key (Mitsubishi's
+    # drive_port: Pr.122 or Pr.336), only the parameter differs, not the actions or range.
     facts = spec_for(protocol).watchdog
     action = wanted.action or facts.actions[0]
     found = len(problems)

@@ -228,6 +228,7 @@ class FleetState:
         self._sources: dict[str, dict[tuple[str, str], tuple[Condition, ...]]] = {}
         # the parameters each drive's values show: its monitor list and condition words
         self._monitored: dict[str, frozenset[str] | None] = {}
+        self._nominal_hz: dict[str, float] = {}  # for a publication that no reply made
         for line in lines:
             for drive in line.drives:
                 state = DriveState(
@@ -242,6 +243,7 @@ class FleetState:
                 self._charted[state.key] = {_FREQUENCY.key: _FREQUENCY}
                 self._sources[state.key] = {}
                 self._monitored[state.key] = _monitored(line, drive)
+                self._nominal_hz[state.key] = drive.nominal_frequency_hz
 
     def _emit(self, event: Event) -> None:
         """Publish ``event``; a drive's discrete events are also kept in its history."""
@@ -466,15 +468,16 @@ class FleetState:
     def drive_watchdog(self, bus: str, name: str, report: WatchdogReport) -> None:
         """A drive's communication watchdog was read and judged (the watchdog audit).
 
-        Readers see it at once; subscribers with the drive's next publication (its next
-        change, or the heartbeat within ``heartbeat_s``), listed in its ``changed``: the
-        verdicts come in a burst after adoption, and an audit result is not worth a
-        publication of its own. The log has the warning at once.
+        A verdict that differs from the one the drive shows is published at once (listed in
+        its ``changed``), so the dashboard and MQTT show it with the log's warning; the same
+        verdict again (an audit repeated when the drive comes back) publishes nothing. This
+        is called once per audit, never per reply.
         """
         key = f"{bus}/{name}"
         old = self._current(key)
         if old.watchdog != report:
-            self._states[key] = dataclasses.replace(old, watchdog=report)
+            new = self._states[key] = dataclasses.replace(old, watchdog=report)
+            self._publish(key, new, self._nominal_hz[key])
 
     def line_availability(self, bus: str, up: bool, reason: str, at: float) -> None:
         """A line opened or was lost."""

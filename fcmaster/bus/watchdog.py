@@ -3,12 +3,12 @@
 Theory of operation
 -------------------
 A ``control: bus`` drive is fed a control word in every exchange, so its own communication
-watchdog (FC 8-03/8-04, Mitsubishi Pr.122, ENC F2.16) is what stops the motor when the
-gateway dies. Each time such a drive comes online (first adoption, after a demotion, after
-the line was down: it may have been replaced meanwhile), :class:`WatchdogAudit` reads those
-parameters through the line's ordinary command queue — reads like any other, served
-between polls, so polling keeps its pace — and judges the setting against the line's
-worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
+watchdog (FC 8-03/8-04, Mitsubishi Pr.122 or Pr.336, ENC F2.16) is what stops the motor
+when the gateway dies. Each time such a drive comes online (first adoption, after a
+demotion, after the line was down: it may have been replaced meanwhile),
+:class:`WatchdogAudit` reads those parameters through the line's ordinary command queue —
+reads like any other, served between polls, so polling keeps its pace — and judges the
+setting against the line's worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
 
 * ``ok`` — the drive stops (ramp or trip) once it hears nothing for longer than a round;
 * ``off`` — it keeps running if the gateway dies (watchdog off, or an action such as
@@ -25,13 +25,21 @@ drives coming up is audited over a minute or so, while every drive keeps being p
 (and its watchdog fed) at nearly its full rate. The reads are the gateway's own
 housekeeping, like the ramp reads, so they make no audit line; the verdict's log line
 carries what they read. ``off`` and ``too_short`` are logged as warnings with the fix in
-words. A drive configured with ``watchdog: {timeout_s, action}`` whose setting differs is
+words, once per drive: the same again when the drive returns is logged at info. A read
+that fails because the drive went offline judges nothing; its return audits it again.
+
+A drive configured with ``watchdog: {timeout_s, action}`` whose setting differs is
 written (timeout first) and read back; the verdict is always that of what the drive
 reports, never of what was asked. A drive that already has the setting is not written, so
-a gateway that restarts often does not wear the drive's memory.
+a gateway that restarts often does not wear the drive's memory. A write the drive refuses
+(Mitsubishi and ENC drives refuse parameter writes while running) is tried again once the
+drive is seen stopped: at most once per stop, so a drive that keeps refusing is asked again
+only after it has run and stopped anew. Only while such a retry waits does the audit look at
+the drive's replies (its status word); otherwise replies never pass through it.
 
 The vendor facts live in each protocol package's ``watchdog`` module, and reach the audit
-through the protocol's spec (``ProtocolSpec.watchdog``).
+through the protocol's spec (``ProtocolSpec.watchdog_of`` the line: Mitsubishi's depend on
+the port the drives are wired to).
 """
 
 from __future__ import annotations
@@ -51,6 +59,8 @@ from fcmaster.bus.master import BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, WatchdogPlan
 from fcmaster.bus.poll_round import poll_round_s
 from fcmaster.clock import Clock
+from fcmaster.protocol.codec import Reply
+from fcmaster.protocol.drive import ControlIntent
 from fcmaster.protocol.registry import spec_for
 from fcmaster.protocol.watchdog import WatchdogFacts, WatchdogSetting
 
@@ -131,13 +141,19 @@ class WatchdogAudit:
         self.plan = plan
         self._clock = clock
         self._turn = asyncio.Lock()  # one audit exchange at a time on the line
-        self.facts = spec_for(plan.protocol).watchdog
+        self.facts = spec_for(plan.protocol).watchdog_of(plan)  # Mitsubishi: by drive_port
         self.round_s = poll_round_s(plan)[0] if plan.drives else 0.0
         self._report = report
         self._execute: Execute | None = None
         self._tasks: dict[str, asyncio.Task[None]] = {}
         self._stopped = False
         self._log = log.bind(bus=plan.name)
+        self._observer: _AuditingObserver | None = None
+        self._warned: dict[str, WatchdogReport] = {}  # the warning each drive last had
+        self._offline: set[str] = set()  # drives that went offline since they last answered
+        # drives whose refused write waits for a stop: name → (the stop seen, wait for a run
+        # first); while any waits, the observer shows the audit the replies
+        self._stop_waits: dict[str, tuple[asyncio.Future[None], bool]] = {}
 
     def attach(self, execute: Execute) -> None:
         """Send the audit's reads and writes through ``execute`` (the line's BusMaster)."""
@@ -145,10 +161,12 @@ class WatchdogAudit:
 
     def observing(self, inner: BusObserver) -> BusObserver:
         """``inner``, with this audit told when a drive comes online."""
-        return _AuditingObserver(inner, self)
+        self._observer = _AuditingObserver(inner, self)
+        return self._observer
 
     def drive_online(self, drive: DrivePlan) -> None:
         """``drive`` answers again: audit it (again), ending an audit still under way."""
+        self._offline.discard(drive.name)
         if not drive.control or self._execute is None or self._stopped:
             return
         running = self._tasks.pop(drive.name, None)
@@ -159,6 +177,14 @@ class WatchdogAudit:
         )
         self._tasks[drive.name] = task
         task.add_done_callback(partial(self._done, drive.name))
+
+    def drive_offline(self, drive: DrivePlan) -> None:
+        """``drive`` stopped answering: what its audit then fails to read judges nothing.
+
+        Reads that failed because the drive lost power are no verdict on its watchdog, so
+        the verdict it had stays until the drive answers again and is audited anew.
+        """
+        self._offline.add(drive.name)
 
     def stop(self) -> None:
         """Shutdown begins: nothing more goes out for the audit, whatever comes online."""
@@ -202,10 +228,80 @@ class WatchdogAudit:
                 values, problem = await self._read(drive, facts)
                 if values is None and problem is None:
                     return
+                if written is Outcome.REFUSED:
+                    self._verdict(drive, facts, values, problem)  # what it has meanwhile
+                    await self._retry_when_stopped(drive, wanted, writes)
+                    return
+        self._verdict(drive, facts, values, problem)
+
+    def _verdict(
+        self,
+        drive: DrivePlan,
+        facts: WatchdogFacts,
+        values: list[float] | None,
+        problem: str | None,
+    ) -> None:
         if values is None:
             self._finish(drive, None, problem)
+        else:
+            self._finish(drive, facts.decode(values), None)
+
+    async def _retry_when_stopped(
+        self, drive: DrivePlan, wanted: WatchdogPlan, writes: tuple[tuple[str, float], ...]
+    ) -> None:
+        """Write again once the drive is seen stopped; again refused: after its next stop."""
+        facts = self.facts
+        assert facts is not None
+        run_first = False  # the first retry: at the first stopped status, even if it is now
+        while True:
+            await self._seen_stopped(drive.name, run_first=run_first)
+            self._log.info(
+                "drive.watchdog_write_retried",
+                drive=drive.name,
+                reason="the drive refused the write, and is now seen stopped",
+                wanted_timeout_s=wanted.timeout_s,
+                wanted_action=wanted.action,
+            )
+            written = await self._write(drive, wanted, writes)
+            if written is None:
+                return
+            if written is Outcome.REFUSED:  # its setting is as last reported: no new verdict
+                run_first = True  # at most once per stop: next after a run and a stop
+                continue
+            values, problem = await self._read(drive, facts)
+            if values is not None or problem is not None:
+                self._verdict(drive, facts, values, problem)
             return
-        self._finish(drive, facts.decode(values), None)
+
+    async def _seen_stopped(self, name: str, *, run_first: bool) -> None:
+        """Until a reply of ``name`` shows it stopped (after one showing it running)."""
+        seen: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._stop_waits[name] = (seen, run_first)
+        self._watch_replies()
+        try:
+            await seen
+        finally:  # seen, or the audit ended (shutdown, the drive came online again)
+            if self._stop_waits.get(name, (None,))[0] is seen:
+                del self._stop_waits[name]
+            self._watch_replies()
+
+    def _watch_replies(self) -> None:
+        """Let the replies through the audit only while a retry waits for a stop."""
+        if self._observer is not None:
+            self._observer.watch(bool(self._stop_waits))
+
+    def drive_replied(self, drive: DrivePlan, reply: Reply) -> None:
+        """A reply while retries wait: a drive seen stopped gets its write again."""
+        wait = self._stop_waits.get(drive.name)
+        status = reply.status
+        if wait is None or status is None:
+            return
+        seen, run_first = wait
+        if status.running:
+            if run_first:
+                self._stop_waits[drive.name] = (seen, False)
+        elif not run_first and not seen.done():
+            seen.set_result(None)
 
     async def _exchange(self, name: str, command: Command) -> CommandResult:
         """Carry out ``command``, then rest, keeping the audit to its share of the line."""
@@ -226,8 +322,10 @@ class WatchdogAudit:
         for parameter in facts.parameters:
             command = Command(action=Action.READ, parameter=parameter, actor=ACTOR, internal=True)
             result = await self._exchange(drive.name, command)
-            if result.outcome is Outcome.CANCELLED:
-                return None, None
+            if result.outcome is Outcome.CANCELLED or (
+                not result.ok and drive.name in self._offline
+            ):
+                return None, None  # the line or the drive is gone: its return audits again
             value = result.value
             if result.outcome is not Outcome.DONE or value is None:
                 return None, f"{parameter} could not be read ({result.outcome.value}: " + (
@@ -240,14 +338,16 @@ class WatchdogAudit:
 
     async def _write(
         self, drive: DrivePlan, wanted: WatchdogPlan, writes: tuple[tuple[str, float], ...]
-    ) -> bool | None:
-        """Write the configured setting; whether every write was done (None: line gone)."""
+    ) -> Outcome | None:
+        """Write the configured setting: DONE, or the first write's failure (None: line gone)."""
         for parameter, value in writes:
             command = Command(
                 action=Action.WRITE, parameter=parameter, value=value, persist=True, actor=ACTOR
             )
             result = await self._exchange(drive.name, command)
-            if result.outcome is Outcome.CANCELLED:
+            if result.outcome is Outcome.CANCELLED or (
+                not result.ok and drive.name in self._offline
+            ):
                 return None
             if result.outcome is not Outcome.DONE:
                 self._log.warning(
@@ -259,15 +359,18 @@ class WatchdogAudit:
                     reason=result.reason or None,
                     wanted_timeout_s=wanted.timeout_s,
                     wanted_action=wanted.action,
+                    retry="once the drive is seen stopped"
+                    if result.outcome is Outcome.REFUSED
+                    else None,
                 )
-                return False
+                return result.outcome
         self._log.info(
             "drive.watchdog_written",
             drive=drive.name,
             timeout_s=wanted.timeout_s,
             action=wanted.action,
         )
-        return True
+        return Outcome.DONE
 
     def _finish(
         self, drive: DrivePlan, setting: WatchdogSetting | None, problem: str | None
@@ -276,6 +379,7 @@ class WatchdogAudit:
         if setting is None:
             report = WatchdogReport(None, "unknown", Verdict.UNKNOWN)
             self._log.info("drive.watchdog_unknown", drive=drive.name, reason=problem)
+            self._warned.pop(drive.name, None)
             self._report(self.plan.name, drive.name, report)
             return
         verdict = judge(setting, self.round_s)
@@ -294,7 +398,10 @@ class WatchdogAudit:
             "action": setting.action,
             "poll_round_s": round_s,
         }
-        if verdict is Verdict.OFF:
+        if self._warned.get(drive.name) == report:
+            # The same again (a drive that comes and goes): said once, not at every return.
+            self._log.info("drive.watchdog_unchanged", **fields, verdict=verdict.value)
+        elif verdict is Verdict.OFF:
             self._log.warning(
                 "drive.watchdog_off",
                 **fields,
@@ -316,6 +423,10 @@ class WatchdogAudit:
             )
         else:
             self._log.info("drive.watchdog_checked", **fields, verdict=verdict.value)
+        if verdict in (Verdict.OFF, Verdict.TOO_SHORT):
+            self._warned[drive.name] = report
+        else:
+            self._warned.pop(drive.name, None)
         self._report(self.plan.name, drive.name, report)
 
 
@@ -323,21 +434,34 @@ class _AuditingObserver:
     """A line's observer, with the audit told of drives coming online.
 
     Only availability goes through here; the other calls are the inner observer's own
-    bound methods, so a reply costs nothing more than before.
+    bound methods, so a reply costs nothing more than before — except while a refused write
+    waits for its drive to stop (:meth:`watch`), when replies pass the audit too.
     """
 
     def __init__(self, inner: BusObserver, audit: WatchdogAudit) -> None:
         self._inner = inner
         self._audit = audit
-        self.drive_replied = inner.drive_replied
+        self.drive_replied: Callable[..., None] = inner.drive_replied
         self.line_availability = inner.line_availability
         self.command_completed = inner.command_completed
 
+    def watch(self, on: bool) -> None:
+        """Show the audit each reply (``on``), or only the inner observer (the usual)."""
+        self.drive_replied = self._replied_watched if on else self._inner.drive_replied
+
+    def _replied_watched(
+        self, bus: str, drive: DrivePlan, reply: Reply, at: float, commanded: ControlIntent | None
+    ) -> None:
+        self._inner.drive_replied(bus, drive, reply, at, commanded)
+        self._audit.drive_replied(drive, reply)
+
     def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
-        """Pass it on; a drive that came online is audited."""
+        """Pass it on; a drive that came online is audited, one that went offline is not."""
         self._inner.drive_availability(bus, drive, online, at)
         if online:
             self._audit.drive_online(drive)
+        else:
+            self._audit.drive_offline(drive)
 
 
 def _matches(

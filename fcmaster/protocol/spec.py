@@ -165,6 +165,9 @@ class ProtocolSpec(Generic[OptionsT]):
     # on the line (FC: drives that know only the 1-31 address format). The keys named here
     # are the ones the doctor shows and compares with the config.
     fallback_options: tuple[OptionPairs, ...] = ()
+    # The watchdog facts of a line with these options where they depend on them (Mitsubishi:
+    # the port the drives are wired to); None: ``watchdog`` on every line.
+    watchdog_for: Callable[[OptionsT], WatchdogFacts] | None = None
 
     def options_of(self, source: object = None) -> OptionsT:
         """This protocol's options as ``source`` has them.
@@ -231,6 +234,12 @@ class ProtocolSpec(Generic[OptionsT]):
         """``source``'s values of the keys the doctor probes (those ``fallback_options`` name)."""
         probed = {name for pairs in self.fallback_options for name, _ in pairs}
         return tuple(pair for pair in self.option_pairs(source) if pair[0] in probed)
+
+    def watchdog_of(self, source: object = None) -> WatchdogFacts:
+        """The drives' watchdog facts on a line with ``source``'s options."""
+        if self.watchdog_for is None:
+            return self.watchdog
+        return self.watchdog_for(self.options_of(source))
 
     def owns_key(self, name: str) -> bool:
         """Whether ``name`` is one of this protocol's own line keys."""

@@ -17,6 +17,7 @@ from playwright.async_api import Browser, async_playwright, expect
 
 from fcmaster.cli import DEMO_CONFIG
 from fcmaster.config import load as load_config
+from fcmaster.config import parse as parse_config
 from fcmaster.service import Service
 from fcmaster.subcommands.daemon import with_http_listen
 from tests.integration.http_harness import wait_until_listening
@@ -64,6 +65,99 @@ async def test_the_drive_view_shows_the_watchdog_verdicts_of_the_demo(browser: B
             await expect(page.get_by_test_id("dv-watchdog")).to_contain_text(text, timeout=20000)
             await page.go_back()
             await expect(page.get_by_test_id("drives")).to_be_visible()
+        assert problems == []
+    finally:
+        service.stop()
+        async with asyncio.timeout(10):
+            await task
+
+
+async def test_the_fleet_table_marks_every_watchdog_verdict_of_the_demo(browser: Browser) -> None:
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    service = Service(with_http_listen(load_config(DEMO_CONFIG), f"127.0.0.1:{port}"), demo=True)
+    task = asyncio.create_task(service.run(install_signals=False), name="test.demo")
+    try:
+        await wait_until_listening(url, timeout_s=30)
+        page = await browser.new_page(viewport={"width": 1280, "height": 900})
+        problems: list[str] = []
+        page.on("pageerror", lambda error: problems.append(str(error)))
+        await page.goto(url + "/")
+        # what demo.yaml's comments say each drive has (each set up by its simulation)
+        expected = {
+            "supply-pump-1": "watchdog ok",
+            "supply-pump-2": "watchdog too short",
+            "cooling-fan-1": "watchdog ok",
+            "mixer-1": "watchdog unknown",
+            "conveyor-1": "watchdog off",
+            "conveyor-2": "watchdog off",
+            "conveyor-3": "watchdog ok",
+        }
+        for name, text in expected.items():
+            badge = page.locator(f'tr[data-drive="{name}"]').get_by_test_id("watchdog")
+            await expect(badge).to_have_text(text, timeout=20000)
+            await expect(badge).to_be_visible()
+        for name in ("cooling-fan-2", "extractor-1", "dosing-pump-1"):  # monitor only
+            badge = page.locator(f'tr[data-drive="{name}"]').get_by_test_id("watchdog")
+            await expect(badge).to_be_hidden()
+        off = page.locator('tr[data-drive="conveyor-1"]').get_by_test_id("watchdog")
+        assert "keeps running if the gateway dies" in (await off.get_attribute("title") or "")
+        assert problems == []
+    finally:
+        service.stop()
+        async with asyncio.timeout(10):
+            await task
+
+
+UNPOWERED = """
+buses:
+  - name: hall
+    port: sim://hall
+    protocol: danfoss-fc
+    baudrate: 115200
+    parity: E
+    offline_after: 2
+    probe_interval_s: 0.5
+    drives:
+      - {{name: pump, address: 1, control: bus, nominal_frequency_hz: 50, max_frequency_hz: 50}}
+      - {{name: fan, address: 2, control: bus, nominal_frequency_hz: 50, max_frequency_hz: 50}}
+    simulation:
+      drives:
+        1: {{parameters: {{"8-03": 1.0, "8-04": 5}}}}
+        2: {{parameters: {{"8-03": 1.0, "8-04": 5}}, faults: "silent_at=0-{dark_s}"}}
+http:
+  listen: 127.0.0.1:{port}
+  anonymous: viewer
+"""
+
+
+async def test_a_drive_that_has_not_answered_says_so_and_shows_its_verdict_once_it_does(
+    browser: Browser,
+) -> None:
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    dark_s = 8  # the fan is unpowered for the first seconds
+    service = Service(parse_config(UNPOWERED.format(port=port, dark_s=dark_s)))
+    task = asyncio.create_task(service.run(install_signals=False), name="test.unpowered")
+    try:
+        await wait_until_listening(url, timeout_s=30)
+        page = await browser.new_page(viewport={"width": 1280, "height": 900})
+        problems: list[str] = []
+        page.on("pageerror", lambda error: problems.append(str(error)))
+        await page.goto(url + "/")
+        pump = page.locator('tr[data-drive="pump"]').get_by_test_id("watchdog")
+        fan = page.locator('tr[data-drive="fan"]').get_by_test_id("watchdog")
+        await expect(pump).to_have_text("watchdog ok", timeout=10000)
+        await expect(fan).to_have_text("watchdog –")  # no verdict: not the same as one
+        await page.locator('tr[data-drive="fan"]').get_by_test_id("open").click()
+        view = page.get_by_test_id("dv-watchdog")
+        await expect(view).to_have_text(
+            "not judged yet: the drive has not answered since the gateway started"
+        )
+        # powered up: audited when it comes online, and the view follows without a reload
+        await expect(view).to_contain_text("ok — timeout 1 s, action stop and trip", timeout=20000)
+        await page.go_back()
+        await expect(fan).to_have_text("watchdog ok")
         assert problems == []
     finally:
         service.stop()

@@ -106,3 +106,12 @@ def test_a_timeout_shorter_than_the_lines_worst_round_is_refused() -> None:
     round_ms = poll_round_s(ok.lines[0])[0] * 1000
     assert 500 < round_ms < 30_000
     assert f"{round_ms:.1f} ms" in problems[0][1]
+
+
+def test_mitsubishi_checks_the_same_actions_and_range_on_either_port() -> None:
+    # what config_watchdog checks against is the same whichever port a line is wired to
+    from fcmaster.protocol.mitsubishi.watchdog import DRIVE_PORTS, watchdog_for
+
+    facts = [watchdog_for(port) for port in DRIVE_PORTS]
+    assert {(f.actions, f.timeout_range_s) for f in facts} == {(("trip",), (0.1, 999.8))}
+    assert {f.parameters for f in facts} == {("Pr.122",), ("Pr.336",)}

@@ -238,6 +238,7 @@ function makeRow(d) {
                                "data-testid": "open", title: "open this drive's view",
                                onclick: () => { location.hash = `drive=${encodeURIComponent(d.name)}`; } });
   record.where = el("div", { class: "muted small" });
+  record.watchdog = el("span", { class: "badge watchdog", "data-testid": "watchdog" });
   record.state = el("td", { class: "state", "data-testid": "state", "data-label": "State" });
   record.frequency = el("span");
   record.reference = el("div", { class: "muted small" });
@@ -245,7 +246,8 @@ function makeRow(d) {
   record.conditions = el("ul", { class: "conditions", "data-testid": "conditions" });
   record.commands = el("td", { class: "operator-only", "data-label": "Commands" });
   record.row = el("tr", { "data-drive": d.name },
-    el("td", { "data-label": "Drive" }, record.open, el("span", { class: "badge", text: d.control }), record.where),
+    el("td", { "data-label": "Drive" }, record.open, el("span", { class: "badge", text: d.control }), record.watchdog,
+       record.where),
     record.state,
     el("td", { class: "frequency", "data-testid": "frequency", "data-label": "Output" },
        record.frequency, record.reference),
@@ -268,6 +270,11 @@ function updateRow(record, d) {
   row.classList.toggle("offline", !d.online);
   row.classList.toggle("faulted", d.fault);
   put(record.where, `${d.bus} · ${d.address}`);
+  const [badge, verdictClass] = watchdogBadge(d);
+  put(record.watchdog, badge);
+  record.watchdog.hidden = !badge;
+  record.watchdog.className = `badge watchdog ${verdictClass}`;
+  record.watchdog.title = watchdogText(d);
   const pills = stateParts(d);
   replaceIf(record, "state", JSON.stringify(pills), record.state, () => pillNodes(pills));
   put(record.frequency, `${fmt(d.output_frequency_hz, 2)} Hz`);
@@ -292,6 +299,35 @@ function stateParts(d) {
   if (d.warning) parts.push(["warning", "pill-warn"]);
   if (d.running && d.at_reference) parts.push(["at reference", "pill-idle"]);
   return parts;
+}
+
+// The drive's own communication watchdog, as the audit judged it: what stops the motor if
+// the gateway dies. A commanded drive that never answered has not been judged: nothing to
+// read yet, which is not the same as a verdict.
+const WATCHDOG_MEANING = {
+  ok: "the drive stops by itself if the gateway dies",
+  off: "the motor keeps running if the gateway dies",
+  too_short: "normal polling can trip the drive",
+  unknown: "what the drive does cannot be told from its settings",
+};
+
+function watchdogText(d) {
+  if (d.control !== "bus") return "monitor only: the gateway does not command this drive";
+  const w = d.watchdog;
+  if (!w) {
+    return d.online ? "not judged yet: being read"
+      : "not judged yet: the drive has not answered since the gateway started";
+  }
+  const text = `${w.verdict} — timeout ${w.timeout_s ?? "–"} s, action ${w.action}: ${WATCHDOG_MEANING[w.verdict] || ""}`;
+  return d.online ? text : `${text} (as read when the drive was last online)`;
+}
+
+function watchdogBadge(d) {
+  if (d.control !== "bus") return ["", ""];
+  const w = d.watchdog;
+  if (!w) return ["watchdog –", ""];
+  const cls = { ok: "badge-ok", off: "badge-bad", too_short: "badge-bad", unknown: "badge-warn" }[w.verdict] || "";
+  return [`watchdog ${w.verdict.replaceAll("_", " ")}`, cls];
 }
 
 function pillNodes(parts) {
@@ -522,10 +558,7 @@ function updateDriveView(d) {
   ];
   replaceIf(detail, "status", JSON.stringify(facts), $("dv-status"),
             () => facts.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
-  const watchdog = d.watchdog
-    ? `${d.watchdog.verdict} — timeout ${d.watchdog.timeout_s ?? "–"} s, action ${d.watchdog.action}`
-    : d.control === "bus" ? "not judged yet" : "monitor only: the gateway does not command this drive";
-  put($("dv-watchdog"), watchdog);
+  put($("dv-watchdog"), watchdogText(d));
   const values = Object.entries(d.values || {}).map(([param, v]) => [
     `${v.name || param} (${param})`,
     v.texts ? (v.texts.length ? v.texts.join(", ") : "none") : `${fmtValue(v.value)}${v.unit ? ` ${v.unit}` : ""}`,

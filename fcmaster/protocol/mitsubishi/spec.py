@@ -12,7 +12,7 @@ from fcmaster.protocol.mitsubishi.codec import MitsubishiCodec, answer_delay_s
 from fcmaster.protocol.mitsubishi.describe import describe_frame
 from fcmaster.protocol.mitsubishi.notation import parse_ascii_frame
 from fcmaster.protocol.mitsubishi.profile import StatusBits
-from fcmaster.protocol.mitsubishi.watchdog import WATCHDOG
+from fcmaster.protocol.mitsubishi.watchdog import DRIVE_PORTS, WATCHDOG, watchdog_for
 from fcmaster.protocol.spec import (
     DiagnosisParameters,
     LineKey,
@@ -30,6 +30,9 @@ class MitsubishiOptions:
     # The waiting time each request carries, for drives at Pr.123 = 9999 (the factory
     # setting); None: requests leave it out because the drives' Pr.123 sets it.
     wait_time_ms: int | None = 0
+    # The drives' port the line is wired to: the PU connector or the RS-485 terminals. Each
+    # has its own communication settings and check (Pr.122 or Pr.336).
+    drive_port: str = "pu"
 
 
 def _codec(options: MitsubishiOptions, nominal_hz: Mapping[int, float]) -> DriveCodec:
@@ -69,6 +72,15 @@ SPEC: Final[ProtocolSpec[MitsubishiOptions]] = ProtocolSpec(
             help="the waiting time each request carries, 0-150 in steps of 10 "
             "(default 0); none when the drives' Pr.123 sets it",
         ),
+        LineKey(
+            name="drive_port",
+            default="pu",
+            choices=DRIVE_PORTS,
+            help="the drives' port the line is wired to: pu (the PU connector, every model; "
+            "its check is Pr.122) or terminals (the RS-485 terminals of A700/F700/800-series "
+            "models; Pr.336) (default pu)",
+            simulated=True,  # the simulated drives supervise that port's check
+        ),
     ),
     new_codec=_codec,
     factory=SerialSettings(19200, "E", 2),  # Pr.118 / Pr.119 / Pr.120 defaults
@@ -100,4 +112,5 @@ SPEC: Final[ProtocolSpec[MitsubishiOptions]] = ProtocolSpec(
     link_type=148,  # pcapng USER1
     simulator="fcmaster.sim.mitsubishi.simulator:SIMULATOR",
     watchdog=WATCHDOG,
+    watchdog_for=lambda options: watchdog_for(options.drive_port),
 )

@@ -19,8 +19,11 @@ output is on; forward/reverse running by the output's direction; SU within Pr.41
 the set frequency; OL (stall prevention) while the motor is overloaded or an injected
 warning is active; FU at or above Pr.42 (6 Hz); ABC1 and, in H79, bit 15 on a trip.
 
-Communication check (Pr.122, §1.1): armed by the first request the drive hears; when no
-request has come for the interval, the drive trips with E.PUE. 9999 switches it off. 0 is
+Communication check (Pr.122 on the PU connector, Pr.336 on the RS-485 terminals, §1.1): the
+check of the port the drive is wired to (``port``), armed by the first request the drive
+hears; when no request has come for the interval, the drive trips with E.PUE (PU connector)
+or E.SER (terminals). The other port hears nothing, so its check never arms. 9999 switches
+it off. 0 is
 model dependent; here it is the E700 reading: the link works, but the drive trips as soon
 as the link commands it (a run command), so 0 cannot protect a commanded motor.
 
@@ -39,6 +42,9 @@ from fcmaster.sim.mitsubishi.parameters import ParameterStore
 from fcmaster.sim.motor import Mode, Motor, MotorCommand
 
 E_PUE: Final = 0xB1  # PU disconnection / communication errors / signal loss (§11)
+E_SER: Final = 0xC6  # communication fault on the RS-485 terminals (§11)
+# The port the link is wired to → its check time interval, its retry count and its trip.
+PORT_CHECKS: Final = {"pu": (122, 121, E_PUE), "terminals": (336, 335, E_SER)}
 HISTORY_LENGTH: Final = 8  # H74-H77: two faults per word
 UP_TO_FREQUENCY: Final = 0.10  # Pr.41 factory setting: ±10 %
 FREQUENCY_DETECTION_HZ: Final = 6.0  # Pr.42 factory setting
@@ -49,10 +55,20 @@ class MitsubishiControl:
     """Run command, set frequency, trips and the communication check of one drive."""
 
     def __init__(
-        self, parameters: ParameterStore, motor: Motor, now: float, *, local: bool = False
+        self,
+        parameters: ParameterStore,
+        motor: Motor,
+        now: float,
+        *,
+        local: bool = False,
+        port: str = "pu",
     ) -> None:
-        """A drive powered up at ``now``; ``local`` keeps it out of network operation."""
+        """A drive powered up at ``now``; ``local`` keeps it out of network operation.
+
+        ``port``: the port the link is wired to, ``pu`` or ``terminals`` (its check).
+        """
         self.parameters = parameters
+        self._check, self.retry_parameter, self.link_trip = PORT_CHECKS[port]
         self.motor = motor
         self.local = local
         self.run_bits = 0
@@ -86,15 +102,15 @@ class MitsubishiControl:
         """Bring the motor and the communication check up to ``now``."""
         deadline = self._check_deadline()
         if deadline is not None and deadline <= now:
-            self.trip(E_PUE, deadline)
+            self.trip(self.link_trip, deadline)
         self.motor.advance(now)
 
     def command(self, bits: int, now: float) -> None:
         """A run command (HFA/HF9 data)."""
         self.advance(now)
         self.run_bits = bits
-        if self.parameters[122] == 0 and bits & (RunCommand.STF | RunCommand.STR):
-            self.trip(E_PUE, now)  # Pr.122 = 0: no check allowed while the link commands
+        if self.parameters[self._check] == 0 and bits & (RunCommand.STF | RunCommand.STR):
+            self.trip(self.link_trip, now)  # 0: no check allowed while the link commands
             return
         self._apply(now)
 
@@ -157,7 +173,7 @@ class MitsubishiControl:
     # -- internals ------------------------------------------------------------------------
 
     def _check_deadline(self) -> float | None:
-        interval = self.parameters[122]
+        interval = self.parameters[self._check]
         if interval in (SETTING_9999, 0) or self._heard_at is None:
             return None
         return self._heard_at + interval * 0.1

@@ -62,7 +62,8 @@ from fcmaster.protocol.mitsubishi.message import (
 )
 from fcmaster.protocol.mitsubishi.parameters import SETTING_9999
 from fcmaster.protocol.mitsubishi.profile import OperationMode
-from fcmaster.sim.mitsubishi.control import E_PUE, MitsubishiControl
+from fcmaster.protocol.mitsubishi.spec import SPEC
+from fcmaster.sim.mitsubishi.control import MitsubishiControl
 from fcmaster.sim.mitsubishi.parameters import (
     SETTINGS,
     WAIT_STEP_MS,
@@ -121,7 +122,10 @@ class MitsubishiSimDrive:
         )
         started = settings.started_at(now)
         self.motor = settings.motor(started)
-        self.control = MitsubishiControl(self.parameters, self.motor, started, local=settings.local)
+        port = SPEC.options_of(line).drive_port  # the line's drive_port key (Pr.122 or Pr.336)
+        self.control = MitsubishiControl(
+            self.parameters, self.motor, started, local=settings.local, port=port
+        )
         self._page = 0
         self._second = 0  # HEC: second parameter changing
         self._monitor = 0x01  # HF3: special monitor selection
@@ -213,9 +217,9 @@ class MitsubishiSimDrive:
         """
         if code in COUNTS_TOWARD_TRIP:
             self._errors += 1
-        allowed = self.parameters[121]
+        allowed = self.parameters[self.control.retry_parameter]  # Pr.121 or Pr.335
         if allowed != SETTING_9999 and self._errors > allowed:
-            self.control.trip(E_PUE, now)
+            self.control.trip(self.control.link_trip, now)
             return self._nak(COMPUTER_NAK)
         return self._nak(code)
 

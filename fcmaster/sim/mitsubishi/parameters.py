@@ -90,6 +90,8 @@ SETTINGS: Final[dict[int, Setting]] = {
         _s(122, SETTING_9999, 0, 9998, with_9999=True),  # 0.1 s; 9999 = no check (sim factory)
         _s(123, SETTING_9999, 0, 150, with_9999=True),  # ms; 9999 = the digit travels in requests
         _s(124, 1, 0, 2),
+        _s(335, 1, 0, 10, with_9999=True),  # as Pr.121, for the RS-485 terminals
+        _s(336, SETTING_9999, 0, 9998, with_9999=True),  # as Pr.122, for the RS-485 terminals
         _s(338, 0, 0, 1),
         _s(339, 0, 0, 2),
         _s(340, 1, 0, 10),  # see the module docstring
@@ -98,7 +100,7 @@ SETTINGS: Final[dict[int, Setting]] = {
     )
 }
 WAIT_STEP_MS: Final = 10  # Pr.123 takes 0-150 ms in steps of 10 (§1.1)
-COMMUNICATION: Final = frozenset(range(117, 125)) | {549}  # kept by "clear except comm"
+COMMUNICATION: Final = frozenset(range(117, 125)) | {335, 336, 549}  # kept by "clear except comm"
 
 
 class ParameterStore:

@@ -50,10 +50,10 @@ def test_drive_state_json_carries_the_watchdog_once_it_is_read() -> None:
     assert read["watchdog"] == {"timeout_s": 0.1, "action": "stop", "verdict": "too_short"}
 
 
-def test_a_new_verdict_is_read_at_once_and_published_with_the_next_heartbeat() -> None:
+def test_a_new_verdict_is_published_at_once_and_only_once_per_change() -> None:
     from fcmaster.bus.plan import DrivePlan, LinePlan
     from fcmaster.protocol.codec import DriveStatus, Reply
-    from fcmaster.state import HEARTBEAT_S, DriveUpdated, Event, FleetState
+    from fcmaster.state import DriveUpdated, Event, FleetState
     from tests.fakes import FakeClock
 
     drive = DrivePlan(name="a", address=1, control=True)
@@ -66,17 +66,20 @@ def test_a_new_verdict_is_read_at_once_and_published_with_the_next_heartbeat() -
     fleet.drive_replied("line1", drive, Reply(address=1, status=status), clock.now(), None)
     events.clear()
     report = WatchdogReport(None, "off", Verdict.OFF)
+    clock.time += 0.5  # well inside the heartbeat: only the verdict can publish
     fleet.drive_watchdog("line1", "a", report)
     state = fleet.get("line1", "a")
     assert state is not None
     assert state.to_json()["watchdog"]["verdict"] == "off"  # readers: at once
-    assert not [e for e in events if isinstance(e, DriveUpdated)]
-    clock.time += 1.0
-    fleet.drive_replied("line1", drive, Reply(address=1, status=status), clock.now(), None)
-    assert not [e for e in events if isinstance(e, DriveUpdated)]  # no change of its own
-    clock.time += HEARTBEAT_S
-    fleet.drive_replied("line1", drive, Reply(address=1, status=status), clock.now(), None)
-    fleet.drive_watchdog("line1", "a", WatchdogReport(None, "off", Verdict.OFF))
     updates = [e for e in events if isinstance(e, DriveUpdated)]
-    assert [u.changed for u in updates] == [("watchdog",)]
+    assert [u.changed for u in updates] == [("watchdog",)]  # subscribers: at once
     assert updates[0].state.watchdog == report
+    events.clear()
+    clock.time += 0.5
+    fleet.drive_replied("line1", drive, Reply(address=1, status=status), clock.now(), None)
+    fleet.drive_watchdog("line1", "a", WatchdogReport(None, "off", Verdict.OFF))  # audit again
+    assert not [e for e in events if isinstance(e, DriveUpdated)]  # same verdict: nothing
+    ok = WatchdogReport(2.0, "stop", Verdict.OK)
+    fleet.drive_watchdog("line1", "a", ok)
+    updates = [e for e in events if isinstance(e, DriveUpdated)]
+    assert [(u.changed, u.state.watchdog) for u in updates] == [(("watchdog",), ok)]

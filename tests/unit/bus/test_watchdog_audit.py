@@ -325,3 +325,80 @@ def test_replies_reach_the_inner_observer_without_a_call_of_the_audits_own() -> 
     # the hot path (every reply) is the inner observer's own bound method, not a wrapper
     assert observer.drive_replied == recorder.drive_replied
     assert observer.command_completed == recorder.command_completed
+
+
+async def test_a_refused_write_is_tried_again_once_per_stop_not_in_a_loop() -> None:
+    a = DrivePlan(name="a", address=1, control=True, watchdog=WatchdogPlan(3.0, "stop"))
+    fc = _drive(1, 600, 0)  # stopped all along
+    line = FcLine(fc)
+
+    def refuse_function_writes(request: bytes) -> bytes | Timed | None:
+        telegram = decode_telegram(request, from_drive=False)
+        if telegram.pnu == FUNCTION and telegram.ak in WRITES:  # error 17: not in this mode
+            pke = make_pke(ResponseAk.ERROR, FUNCTION)
+            return reply_frame(1, fc.status_word, pke=pke, pwe=17)
+        return line(request)
+
+    b, reports, audit = _bench(a, fc=[fc], responder=refuse_function_writes)
+    with structlog.testing.capture_logs() as logs:
+        async with b.master:
+            await b.clock.run_until(T0 + 60.0)
+            await audit.aclose()
+    function_writes = [
+        at for at, kind, pnu, _ in _accesses(b, 1) if (kind, pnu) == ("write", FUNCTION)
+    ]
+    # Refused at adoption, tried once more at the first stopped status (it was stopped), then
+    # never again: the drive did not run and stop anew in the minute that followed.
+    assert len(function_writes) == 2
+    assert function_writes[1] - function_writes[0] < 2.0
+    assert [e["event"] for e in logs if e["event"].startswith("drive.watchdog_write")] == [
+        "drive.watchdog_write_failed",
+        "drive.watchdog_write_retried",
+        "drive.watchdog_write_failed",
+    ]
+    assert reports == [("a", WatchdogReport(None, "off", Verdict.OFF))]  # one verdict, no repeat
+
+
+async def test_a_drive_that_loses_power_during_its_audit_keeps_its_verdict_until_it_returns() -> (
+    None
+):
+    a = DrivePlan(name="a", address=1, control=True)
+    fc = _drive(1, 20, 2)
+    b, reports, audit = _bench(a, fc=[fc], probe_interval_s=0.5)
+    with structlog.testing.capture_logs() as logs:
+        async with b.master:
+            await b.clock.run_until(T0 + 3.0)
+            assert [r for _, r in reports] == [WatchdogReport(2.0, "stop", Verdict.OK)]
+            fc.silent = True  # powered down …
+            await b.clock.run_until(T0 + 4.0)
+            fc.silent = False  # … back: audited again, and again gone after its first read
+            back = b.clock.now()
+            while not [1 for at, kind, _, _ in _accesses(b, 1) if at > back and kind == "read"]:
+                await b.clock.run_until(b.clock.now() + 0.01)
+            fc.silent = True
+            await b.clock.run_until(T0 + 10.0)
+            assert [r for _, r in reports] == [WatchdogReport(2.0, "stop", Verdict.OK)]
+            fc.silent = False  # back for good: the audit ends with a verdict again
+            await b.clock.run_until(T0 + 14.0)
+            await audit.aclose()
+    # what a powered-down drive did not answer is no verdict: no "unknown" in between
+    assert [r.verdict for _, r in reports] == [Verdict.OK, Verdict.OK]
+    assert not any(e["event"] == "drive.watchdog_unknown" for e in logs)
+
+
+async def test_the_same_warning_is_given_once_not_at_every_return_of_the_drive() -> None:
+    a = DrivePlan(name="a", address=1, control=True)
+    fc = _drive(1, 600, 0)  # factory: Off
+    b, reports, audit = _bench(a, fc=[fc], probe_interval_s=0.5)
+    with structlog.testing.capture_logs() as logs:
+        async with b.master:
+            for start in (3.0, 6.0, 9.0):
+                await b.clock.run_until(T0 + start)
+                fc.silent = True
+                await b.clock.run_until(T0 + start + 1.0)
+                fc.silent = False
+            await b.clock.run_until(T0 + 14.0)
+            await audit.aclose()
+    assert [r.verdict for _, r in reports] == [Verdict.OFF] * 4  # audited at every return
+    events = [e["event"] for e in logs if e["event"].startswith("drive.watchdog_")]
+    assert events == ["drive.watchdog_off"] + ["drive.watchdog_unchanged"] * 3
