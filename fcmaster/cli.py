@@ -9,13 +9,11 @@ dispatches and maps errors.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import sys
 from collections.abc import Callable, Coroutine
 from typing import Any
 
 from fcmaster.cli_arguments import DEMO_CONFIG, build_parser
-from fcmaster.clock import new_event_loop
 from fcmaster.errors import BusError, CommandError, ConfigError, FcmasterError, UsageError
 from fcmaster.protocol.registry import line_keys
 
@@ -35,6 +33,11 @@ EXIT_USAGE = 2
 
 
 def _run_async(coro: Coroutine[Any, Any, int]) -> int:
+    # Imported here: --help, decode and the other synchronous commands start without asyncio.
+    import asyncio
+
+    from fcmaster.clock import new_event_loop
+
     with asyncio.Runner(loop_factory=new_event_loop) as runner:
         return runner.run(coro)
 

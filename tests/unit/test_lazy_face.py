@@ -1,0 +1,76 @@
+"""Lazy package faces: a module below a face loads without the rest of the face.
+
+Which modules an import loads is checked in a fresh interpreter, since this one has
+imported nearly everything already.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import types
+
+import pytest
+
+import fcmaster.adapters
+import fcmaster.bus
+from fcmaster.lazy_face import lazy_face
+
+HEAVY = ("fcmaster.bus.master", "fcmaster.bus.serial", "structlog", "serial", "asyncio")
+
+
+def loaded_after(statement: str, modules: tuple[str, ...]) -> list[str]:
+    """Which of ``modules`` a fresh interpreter has loaded after running ``statement``."""
+    probe = f"import sys\n{statement}\nprint(' '.join(m for m in {modules!r} if m in sys.modules))"
+    done = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, timeout=60
+    )
+    return done.stdout.split()
+
+
+def test_the_bus_plan_loads_without_the_master_logging_or_pyserial() -> None:
+    assert loaded_after("import fcmaster.bus.plan", HEAVY) == []
+
+
+def test_the_config_loads_without_the_master_or_the_adapters() -> None:
+    others = (*HEAVY, "fcmaster.adapters.gateway", "fcmaster.hub", "fcmaster.state", "pydantic")
+    assert loaded_after("import fcmaster.config", others) == ["pydantic"]
+
+
+def test_the_cli_starts_without_asyncio_or_the_bus() -> None:
+    assert loaded_after("import fcmaster.cli", (*HEAVY, "fcmaster.bus")) == []
+
+
+def test_a_face_lists_every_public_name_before_any_is_used() -> None:
+    statement = "import fcmaster.bus as face\nnames = dir(face)"
+    listed = loaded_after(statement + "\nprint(*names)", ())
+    assert set(fcmaster.bus.__all__) <= set(listed)
+    assert loaded_after(statement, HEAVY) == []  # listing them loads nothing
+
+
+def test_a_face_hands_out_the_defining_modules_object() -> None:
+    from fcmaster.adapters.gateway import Gateway
+    from fcmaster.bus.master import BusMaster
+
+    assert fcmaster.bus.BusMaster is BusMaster
+    assert fcmaster.adapters.Gateway is Gateway
+    assert "BusMaster" in vars(fcmaster.bus)  # kept: the next use is a plain attribute
+
+
+def test_a_name_that_is_not_public_is_an_attribute_error() -> None:
+    with pytest.raises(AttributeError, match=r"'fcmaster\.bus' has no attribute 'Planner'"):
+        getattr(fcmaster.bus, "Planner".strip())  # mypy refuses the attribute: so does Python
+
+
+def test_a_face_whose_modules_do_not_match_its_all_fails_on_import() -> None:
+    package = types.ModuleType("fcmaster_test_face")
+    sys.modules[package.__name__] = package
+    try:
+        with pytest.raises(ImportError, match=r"no module given for \['Gone'\]"):
+            lazy_face(package.__name__, ["Gone", "Kept"], {"fcmaster.bus.plan": ("Kept",)})
+        with pytest.raises(ImportError, match=r"not in __all__: \['LinePlan'\]"):
+            lazy_face(
+                package.__name__, ["DrivePlan"], {"fcmaster.bus.plan": ("DrivePlan", "LinePlan")}
+            )
+    finally:
+        del sys.modules[package.__name__]
