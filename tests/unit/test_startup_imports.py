@@ -1,4 +1,5 @@
-"""Lazy package faces: a module below a face loads without the rest of the face.
+"""What starting loads: a module below a lazy face comes without the rest of the face, and
+a command that opens no port starts without asyncio or the protocol specs.
 
 Which modules an import loads is checked in a fresh interpreter, since this one has
 imported nearly everything already.
@@ -14,6 +15,7 @@ import pytest
 
 import fcmaster.adapters
 import fcmaster.bus
+from fcmaster.cli_arguments import build_parser
 from fcmaster.lazy_face import lazy_face
 
 HEAVY = ("fcmaster.bus.master", "fcmaster.bus.serial", "structlog", "serial", "asyncio")
@@ -74,3 +76,38 @@ def test_a_face_whose_modules_do_not_match_its_all_fails_on_import() -> None:
             )
     finally:
         del sys.modules[package.__name__]
+
+
+SPECS = tuple(f"fcmaster.protocol.{v}.spec" for v in ("danfoss_fc", "mitsubishi", "enc"))
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--help"],
+        ["decode", "--protocol", "enc", "--help"],
+        ["check", "--help"],
+    ],
+)
+def test_a_command_that_opens_no_port_starts_without_the_protocol_specs(argv: list[str]) -> None:
+    statement = (
+        "import contextlib, io\nfrom fcmaster.cli import main\n"
+        f"with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    main({argv!r})"
+    )
+    assert loaded_after(statement, (*SPECS, "asyncio")) == []
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["scan", "--port", "p", "--protocol", "enc", "--address-encoding", "decimal"],
+        ["status", "--port", "p", "--address", "3", "--address-format", "31"],
+        ["params", "backup", "--port", "p", "--address", "1", "--output", "x.json"],
+        ["sim", "--protocol", "enc", "--addresses", "1-3", "--address-encoding", "decimal"],
+    ],
+)
+def test_a_parser_built_for_one_command_parses_it_as_the_whole_parser_does(
+    argv: list[str],
+) -> None:
+    assert build_parser(argv[0]).parse_args(argv) == build_parser().parse_args(argv)
