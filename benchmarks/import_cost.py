@@ -37,7 +37,7 @@ IMPORTS = (
 )
 COMMANDS = {
     "help": ("--help",),
-    "decode": ("decode", *"02 0e 01 04 7f 00 00 00 00 00 00 04 7f 00 00 0d".split()),
+    "decode": ("decode", "020e01047f000000000000047f00000d"),
     "check_demo": ("check", "--config", str(ROOT / "config" / "demo.yaml")),
 }
 

@@ -11,11 +11,13 @@ import argparse
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fcmaster import __version__
 from fcmaster.protocol.registry import DEFAULT, NAMES, PROTOCOLS
-from fcmaster.protocol.spec import LineKey
+
+if TYPE_CHECKING:  # the specs load only for a command that opens a port
+    from fcmaster.protocol.spec import LineKey
 
 DEMO_CONFIG = Path(__file__).resolve().parent / "demo.yaml"  # config/demo.yaml links here
 

@@ -95,7 +95,17 @@ def test_a_command_that_opens_no_port_starts_without_the_protocol_specs(argv: li
         f"with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
         f"    main({argv!r})"
     )
-    assert loaded_after(statement, (*SPECS, "asyncio")) == []
+    assert loaded_after(statement, (*SPECS, "fcmaster.protocol.codec", "asyncio")) == []
+
+
+def test_decoding_a_frame_loads_the_spec_of_its_protocol_only() -> None:
+    frame = "020e01047f000000000000047f00000d"  # an FC telegram with a good BCC
+    statement = (
+        "import contextlib, io\nfrom fcmaster.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    assert main(['decode', {frame!r}]) == 0"
+    )
+    assert loaded_after(statement, SPECS) == ["fcmaster.protocol.danfoss_fc.spec"]
 
 
 @pytest.mark.parametrize(
