@@ -41,11 +41,12 @@ import aiomqtt
 
 from fcmaster.adapters.gateway import LineInfo
 from fcmaster.adapters.mqtt import MqttAdapter
+from fcmaster.adapters.settings import MqttSettings
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock, new_event_loop
-from fcmaster.config import MqttModel, parse
+from fcmaster.config import parse
 from fcmaster.hub import Hub
 from fcmaster.protocol.danfoss_fc import decode_telegram
 from fcmaster.service import Service
@@ -194,7 +195,8 @@ async def measure(count: int, drives: int, baudrate: int, *, nodelay: bool) -> N
             running = asyncio.create_task(service.run(install_signals=False))
             gateway = TapGateway(service)
             adapter = MqttAdapter(
-                MqttModel(url=f"mqtt://127.0.0.1:{port}", commands=True, trust_broker=True), gateway
+                MqttSettings(url=f"mqtt://127.0.0.1:{port}", commands=True, trust_broker=True),
+                gateway,
             )
             async with adapter, aiomqtt.Client("127.0.0.1", port, socket_options=NODELAY) as client:
                 await adapter.connected.wait()

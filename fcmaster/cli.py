@@ -9,7 +9,6 @@ dispatches and maps errors.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import os
 import signal
 import sys
@@ -17,7 +16,6 @@ from collections.abc import Callable, Coroutine
 from typing import Any
 
 from fcmaster.cli_arguments import DEMO_CONFIG, build_parser
-from fcmaster.clock import new_event_loop
 from fcmaster.errors import BusError, CommandError, ConfigError, FcmasterError, UsageError
 from fcmaster.protocol.registry import spec_for
 
@@ -41,6 +39,11 @@ EXIT_PIPE_CLOSED = 128 + signal.SIGPIPE
 
 
 def _run_async(coro: Coroutine[Any, Any, int]) -> int:
+    # Imported here: --help, decode and the other synchronous commands start without asyncio.
+    import asyncio
+
+    from fcmaster.clock import new_event_loop
+
     with asyncio.Runner(loop_factory=new_event_loop) as runner:
         return runner.run(coro)
 
@@ -214,7 +217,10 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code."""
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    # Only the subcommand named gets its protocols' options (see build_parser).
+    command = next((arg for arg in argv if not arg.startswith("-")), "")
+    args = build_parser(command).parse_args(argv)
     if args.command not in ("run", "decode", "check", "modbus-map", "ports"):
         from fcmaster import logsetup
 

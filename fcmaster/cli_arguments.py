@@ -11,11 +11,13 @@ import argparse
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fcmaster import __version__
 from fcmaster.protocol.registry import DEFAULT, NAMES, PROTOCOLS
-from fcmaster.protocol.spec import LineKey
+
+if TYPE_CHECKING:  # the specs load only for a command that opens a port
+    from fcmaster.protocol.spec import LineKey
 
 DEMO_CONFIG = Path(__file__).resolve().parent / "demo.yaml"  # config/demo.yaml links here
 
@@ -48,15 +50,16 @@ def _seconds(text: str) -> float:
     return value
 
 
-def _line_options(parser: argparse.ArgumentParser) -> None:
-    """The options of every command that opens a port."""
+def _line_options(parser: argparse.ArgumentParser, protocols: bool) -> None:
+    """The options of every command that opens a port (``protocols``: with their own)."""
     parser.add_argument("--port", required=True, help="/dev/ttyUSB0, COM3, socket://host:port")
     parser.add_argument("--protocol", choices=NAMES, default=DEFAULT)
     parser.add_argument("--baudrate", type=int, help="default: the protocol's factory setting")
     parser.add_argument("--parity", choices=("N", "E", "O"))
     parser.add_argument("--stopbits", type=int, choices=(1, 2))
     parser.add_argument("--timeout", type=_seconds, help="reply deadline in seconds")
-    protocol_options(parser)
+    if protocols:
+        protocol_options(parser)
 
 
 def protocol_options(
@@ -106,8 +109,17 @@ def _stepped(key: LineKey) -> Callable[[str], int | None]:
     return parse
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser for every subcommand."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser for every subcommand.
+
+    With ``command`` (the one about to be parsed; "" for none), only that subcommand gets
+    each protocol's own options: the protocol specs they come from are then loaded only for
+    a command that opens a port, and ``--help`` or ``decode`` start without them.
+    """
+
+    def full(name: str) -> bool:
+        return command is None or command == name
+
     parser = argparse.ArgumentParser(
         prog="fcmaster", description="RS-485 master for fleets of variable frequency drives."
     )
@@ -133,26 +145,26 @@ def build_parser() -> argparse.ArgumentParser:
     modbus_map.add_argument("--json", action="store_true", help="print JSON")
 
     scan = commands.add_parser("scan", help="find which addresses answer")
-    _line_options(scan)
+    _line_options(scan, full("scan"))
     scan.add_argument(
         "--addresses", type=_addresses, help="default: every address the protocol can reach"
     )
     scan.add_argument("--json", action="store_true", help="print JSON")
 
     status = commands.add_parser("status", help="one drive's decoded status now")
-    _line_options(status)
+    _line_options(status, full("status"))
     status.add_argument("--address", type=int, required=True)
     status.add_argument("--json", action="store_true", help="print JSON")
 
     read = commands.add_parser("read", help="read a parameter, scaled to its unit")
-    _line_options(read)
+    _line_options(read, full("read"))
     read.add_argument("--address", type=int, required=True)
     read.add_argument("--index", type=int, default=0)
     read.add_argument("--json", action="store_true", help="print JSON")
     read.add_argument("parameter", metavar="PARAM", help="as the manual writes it, e.g. 16-13")
 
     write = commands.add_parser("write", help="write a parameter")
-    _line_options(write)
+    _line_options(write, full("write"))
     write.add_argument("--address", type=int, required=True)
     write.add_argument("--index", type=int, default=0)
     write.add_argument("--persist", action="store_true", help="to non-volatile memory too")
@@ -160,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     write.add_argument("value", metavar="VALUE")
 
     control = commands.add_parser("control", help="start, stop, coast, quick-stop, reset, …")
-    _line_options(control)
+    _line_options(control, full("control"))
     control.add_argument("--address", type=int, required=True)
     control.add_argument(
         "action",
@@ -209,7 +221,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--duplicate-addresses", action="store_true",
         help="serve a repeated address (--addresses 1,1) as two drives that both answer",
     )  # fmt: skip
-    protocol_options(sim, lambda key: key.simulated)  # what the simulated drives take
+    if full("sim"):
+        protocol_options(sim, lambda key: key.simulated)  # what the simulated drives take
 
     ports = commands.add_parser(
         "ports", help="this machine's serial adapters: stable names, driver, latency timer"
@@ -254,7 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
     monitor.add_argument("--once", action="store_true", help="print one table and exit")
     monitor.add_argument("--interval", type=float, default=0.5, help="seconds between redraws")
 
-    _params_parser(commands)
+    _params_parser(commands, full("params"))
 
     decode = commands.add_parser(
         "decode",
@@ -275,14 +288,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _params_parser(commands: Any) -> None:
+def _params_parser(commands: Any, protocols: bool) -> None:
     """`params backup | diff | restore`: a drive's parameter set to a file and back."""
     params = commands.add_parser("params", help="back up, compare and restore parameter sets")
     verbs = params.add_subparsers(dest="params_command", required=True, metavar="VERB")
     backup = verbs.add_parser(
         "backup", help="every writable parameter of a drive, with its identity, to YAML"
     )
-    _line_options(backup)
+    _line_options(backup, protocols)
     backup.add_argument("--address", type=int, required=True)
     backup.add_argument("-o", "--output", type=Path, metavar="FILE", help="default: stdout")
     diff = verbs.add_parser(
@@ -292,7 +305,7 @@ def _params_parser(commands: Any) -> None:
         "sets (FILE FILE). Exit codes: 0 the settings are equal, 1 they differ (or the drive "
         "could not be read), 2 bad input. Identity (serial numbers) is shown, not compared.",
     )
-    _line_options(diff)
+    _line_options(diff, protocols)
     for action in diff._actions:
         if action.dest == "port":
             action.required = False  # two files need no port
@@ -306,7 +319,7 @@ def _params_parser(commands: Any) -> None:
         "written; line settings (address, baud, parity, protocol) are left alone. Exit 0 "
         "when every other difference was written and verified, 1 otherwise.",
     )
-    _line_options(restore)
+    _line_options(restore, protocols)
     restore.add_argument("--address", type=int, required=True)
     restore.add_argument(
         "--force", action="store_true", help="restore a set saved from another drive type"

@@ -10,8 +10,10 @@ Loading happens in three passes, and every pass reports *every* problem it finds
    monitor parameters that the protocol can address, limits that make sense.
 
 The result is a :class:`Config` whose lines are :class:`~fcmaster.bus.plan.LinePlan`
-dataclasses; nothing below ``service`` ever sees pydantic. The adapter sections' models
-live in :mod:`fcmaster.config_sections`, the YAML helpers in :mod:`fcmaster.config_yaml`;
+dataclasses and each adapter gets its settings (:mod:`fcmaster.adapters.settings`);
+nothing below ``service`` ever sees pydantic. The adapter sections' models live in
+:mod:`fcmaster.config_sections` (the Modbus checks over every bus in
+:mod:`fcmaster.config_modbus`), the YAML helpers in :mod:`fcmaster.config_yaml`;
 a protocol's own line keys (``address_format``, ``terminator``, …) and the protocol names
 come from the protocol specs (:mod:`fcmaster.protocol.registry`).
 """
@@ -37,8 +39,10 @@ from pydantic import (
 )
 
 from fcmaster.adapters.auth import listen_problem
+from fcmaster.adapters.settings import HttpSettings, ModbusSettings, MqttSettings
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.config_modbus import check_modbus, modbus_units
 from fcmaster.config_sections import (
     HttpModel,
     LoggingModel,
@@ -47,8 +51,6 @@ from fcmaster.config_sections import (
     MqttModel,
     TlsModel,
     TokenModel,
-    is_loopback,
-    modbus_listen,
 )
 from fcmaster.config_sections import StrictModel as _Model
 from fcmaster.config_values import check_name, port_url_problem
@@ -72,8 +74,6 @@ __all__ = [
     "TlsModel",
     "TokenModel",
     "load",
-    "modbus_listen",
-    "modbus_units",
     "parse",
 ]
 
@@ -159,11 +159,44 @@ class ConfigModel(_Model):
 
 @dataclass(slots=True, frozen=True)
 class Config:
-    """A validated configuration: plans for the lines, models for the adapters."""
+    """A validated configuration: plans for the lines, settings for the adapters.
+
+    ``model`` is the file as validated, for the CLI and the service; adapters are handed
+    :attr:`http`, :attr:`mqtt` and :attr:`modbus` (None: the section is absent).
+    """
 
     lines: tuple[LinePlan, ...]
     model: ConfigModel
     path: Path | None = None
+
+    @property
+    def http(self) -> HttpSettings | None:
+        """The HTTP adapter's settings."""
+        return None if self.model.http is None else self.model.http.settings()
+
+    @property
+    def mqtt(self) -> MqttSettings | None:
+        """The MQTT adapter's settings."""
+        return None if self.model.mqtt is None else self.model.mqtt.settings()
+
+    @property
+    def modbus(self) -> ModbusSettings | None:
+        """The Modbus TCP adapter's settings, with every drive's unit id."""
+        return (
+            None if self.model.modbus is None else self.model.modbus.settings(self.modbus_units())
+        )
+
+    def modbus_units(self) -> dict[str, int]:
+        """Each drive's Modbus unit id by name; ConfigError if two drives would share one.
+
+        ``load`` checks this only when the file has a ``modbus`` section; the register map
+        of a file without one (``fcmaster modbus-map``) is checked here.
+        """
+        problems: list[tuple[str, str]] = []
+        units = modbus_units(self.model.buses, problems)
+        if problems:
+            raise ConfigError(problems)
+        return units
 
 
 def load(path: Path | str, *, buses_only: bool = False) -> Config:
@@ -342,17 +375,7 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
         for d, drive in enumerate(bus.drives):
             check_name(drive.name, f"buses[{b}].drives[{d}].name", problems)
     if model.modbus is not None:
-        modbus_units(model, problems)
-        host, _ = modbus_listen(model.modbus.listen)
-        if not model.modbus.allow and not is_loopback(host):  # [] lets no PLC in either
-            problems.append(
-                (
-                    "modbus.listen",
-                    f"{model.modbus.listen} reaches beyond this machine and Modbus has no "
-                    "authentication: list the PLCs' addresses in modbus.allow "
-                    "(e.g. [10.0.5.0/24]) or listen on 127.0.0.1",
-                )
-            )
+        check_modbus(model.modbus, model.buses, problems)
     for b, bus in enumerate(model.buses):
         if bus.port.startswith("sim://"):  # what `run` builds the simulated line from
             from fcmaster.clock import MonotonicClock
@@ -390,41 +413,6 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                 problems.append((path, f"the same token is already used at {secrets[token.token]}"))
             secrets.setdefault(token.token, path)
     return tuple(lines)
-
-
-def modbus_units(model: ConfigModel, problems: list[tuple[str, str]]) -> dict[str, int]:
-    """Each drive's Modbus unit id (``modbus_unit``, else its bus address), by drive name.
-
-    A unit id names one drive across every bus, so a clash (two lines that both have an
-    address 1) is a problem for ``problems``, with the fix.
-    """
-    units: dict[str, int] = {}
-    seen: dict[int, str] = {}
-    for b, bus in enumerate(model.buses):
-        for d, drive in enumerate(bus.drives):
-            where = f"buses[{b}].drives[{d}]"
-            unit = drive.address if drive.modbus_unit is None else drive.modbus_unit
-            if not 1 <= unit <= 247:
-                problems.append(
-                    (
-                        f"{where}.modbus_unit",
-                        f"address {unit} is no Modbus unit id (1-247): set modbus_unit",
-                    )
-                )
-                continue
-            key = f"{where}.modbus_unit" if drive.modbus_unit is not None else f"{where}.address"
-            if unit in seen:
-                problems.append(
-                    (
-                        f"{where}.modbus_unit",
-                        f"Modbus unit {unit} is already taken by {seen[unit]}: set a "
-                        "modbus_unit of its own on one of them",
-                    )
-                )
-                continue
-            seen[unit] = f"{drive.name} ({key})"
-            units[drive.name] = unit
-    return units
 
 
 _PLAN_FIELDS = frozenset(field.name for field in dataclasses.fields(LinePlan))

@@ -8,10 +8,20 @@ that need the whole file (tokens that MQTT commands need, Modbus unit ids across
 from __future__ import annotations
 
 import ipaddress
+from collections.abc import Mapping
 from typing import Annotated, Literal
 from urllib.parse import urlsplit
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from fcmaster.adapters.settings import (
+    HttpSettings,
+    ModbusSettings,
+    MqttSettings,
+    TlsSettings,
+    Token,
+    modbus_listen,
+)
 
 
 class StrictModel(BaseModel):
@@ -35,6 +45,15 @@ class HttpModel(StrictModel):
     tokens: list[TokenModel] = Field(default_factory=list)
     anonymous: Literal["none", "viewer"] = "none"
     cors_origins: list[str] = Field(default_factory=list)
+
+    def settings(self) -> HttpSettings:
+        """What the HTTP adapter is told."""
+        return HttpSettings(
+            listen=self.listen,
+            tokens=tuple(Token(t.name, t.role, t.token) for t in self.tokens),
+            anonymous=self.anonymous,
+            cors_origins=tuple(self.cors_origins),
+        )
 
 
 class TlsModel(StrictModel):
@@ -91,6 +110,12 @@ class MqttModel(StrictModel):
             raise ValueError("reconnect_min_s is above reconnect_max_s")
         return self
 
+    def settings(self) -> MqttSettings:
+        """What the MQTT adapter is told."""
+        fields = self.model_dump(exclude={"tls"})
+        tls = None if self.tls is None else TlsSettings(**self.tls.model_dump())
+        return MqttSettings(**fields, tls=tls)
+
     @field_validator("base_topic", "status_topic", "discovery_prefix")
     @classmethod
     def _check_topic(cls, topic: str | None) -> str | None:
@@ -126,16 +151,12 @@ class ModbusModel(StrictModel):
             raise ValueError("write it like 127.0.0.1:5020 or [::1]:5020")
         return listen
 
-
-def modbus_listen(text: str) -> tuple[str, int | None]:
-    """``"127.0.0.1:5020"`` or ``"[::1]:5020"`` → host and port (None if not a number)."""
-    text = text.strip()
-    if text.startswith("["):
-        host, _, rest = text[1:].partition("]")
-        port = rest[1:] if rest.startswith(":") else ""
-    else:
-        host, _, port = text.rpartition(":") if text.count(":") == 1 else (text, "", "")
-    return host, int(port) if port.isdigit() else None
+    def settings(self, units: Mapping[str, int]) -> ModbusSettings:
+        """What the Modbus adapter is told, with each drive's unit id (see ``modbus_units``)."""
+        allow = None if self.allow is None else tuple(self.allow)
+        return ModbusSettings(
+            listen=self.listen, allow=allow, commands=self.commands, units=dict(units)
+        )
 
 
 def is_loopback(host: str) -> bool:

@@ -61,7 +61,7 @@ SHUTTING_DOWN = "fcmaster is shutting down"
 TransportFactory = Callable[[LinePlan], Transport]
 
 # config section → the adapter class it switches on, as "module:Class". Each adapter is an
-# async context manager built as Class(section_model, gateway, demo=bool).
+# async context manager built as Class(section_settings, gateway, demo=bool).
 ADAPTERS = {
     "http": "fcmaster.adapters.http:HttpAdapter",
     "mqtt": "fcmaster.adapters.mqtt:MqttAdapter",
@@ -231,9 +231,9 @@ class Service:
                         # only garble both. Unlike a missing adapter, this is not waited out.
                         raise serial.in_use
                 for section, target in ADAPTERS.items():
-                    model = getattr(self.config.model, section)
-                    if model is not None:
-                        await stack.enter_async_context(self._adapter(target, model))
+                    settings = getattr(self.config, section)
+                    if settings is not None:
+                        await stack.enter_async_context(self._adapter(target, settings))
                 log.info(
                     "service.started",
                     lines=len(self.masters),
@@ -260,21 +260,21 @@ class Service:
                     loop.remove_signal_handler(sig)
         log.info("service.stopped")
 
-    def _adapter(self, target: str, model: Any) -> AbstractAsyncContextManager[Any]:
+    def _adapter(self, target: str, settings: Any) -> AbstractAsyncContextManager[Any]:
         module, _, name = target.partition(":")
         options: dict[str, Any] = {"demo": self.demo}
         if target == ADAPTERS["http"]:  # /metrics is served on the HTTP listener
             metrics = self.config.model.metrics
             options["metrics_enabled"] = metrics is not None and metrics.enabled
         if target == ADAPTERS["modbus"]:  # unit ids and monitored values come from the lines
-            options["config"] = self.config
+            options["lines"] = self.config.lines
         if target == ADAPTERS["mqtt"]:  # MQTT commands carry the tokens of http.tokens
-            http = self.config.model.http
+            http = self.config.http
             options["tokens"] = tuple(
-                (t.name, t.role, t.token) for t in (http.tokens if http else ())
+                (t.name, t.role, t.secret) for t in (http.tokens if http else ())
             )
         factory = getattr(importlib.import_module(module), name)
-        adapter: AbstractAsyncContextManager[Any] = factory(model, self, **options)
+        adapter: AbstractAsyncContextManager[Any] = factory(settings, self, **options)
         return adapter
 
     async def _stop_drives(self) -> None:

@@ -40,8 +40,8 @@ from fcmaster.adapters.auth import (
 )
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.http_guard import HEAD_TIMEOUT_S, ConnectionGuard, guarded_protocol
+from fcmaster.adapters.settings import HttpSettings
 from fcmaster.adapters.stream import StreamRegistry
-from fcmaster.config import HttpModel
 from fcmaster.errors import ConfigError
 
 log = structlog.get_logger("fcmaster.adapters.http")
@@ -72,19 +72,19 @@ class _Server(uvicorn.Server):
 class HttpAdapter:
     """Serves the HTTP API, stream, dashboard and metrics while the context is entered.
 
-    Built by the service as ``HttpAdapter(model, gateway, demo=…)``; pass
+    Built by the service as ``HttpAdapter(settings, gateway, demo=…)``; pass
     ``metrics_enabled=False`` when the config's ``metrics.enabled`` is false.
     """
 
     def __init__(
         self,
-        model: HttpModel,
+        settings: HttpSettings,
         gateway: Gateway,
         *,
         demo: bool = False,
         metrics_enabled: bool = True,
     ) -> None:
-        self.model = model
+        self.settings = settings
         self.gateway = gateway
         self.demo = demo
         self.metrics_enabled = metrics_enabled
@@ -105,14 +105,14 @@ class HttpAdapter:
         return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
 
     def _authenticator(self, host: str) -> Authenticator:
-        tokens = [(t.name, Role[t.role.upper()], t.token) for t in self.model.tokens]
-        problem = listen_problem(self.model.listen, has_tokens=bool(tokens))
+        tokens = [(t.name, Role[t.role.upper()], t.secret) for t in self.settings.tokens]
+        problem = listen_problem(self.settings.listen, has_tokens=bool(tokens))
         if problem:  # `check` refuses it too; --http-listen can still bring it here
             raise ConfigError([("http.listen", problem)])
         if self.demo:
             self.operator_token = secrets.token_urlsafe(24)
             tokens.append((DEMO_TOKEN_NAME, Role.OPERATOR, self.operator_token))
-        return Authenticator(tokens, anonymous=self.model.anonymous == "viewer" or not tokens)
+        return Authenticator(tokens, anonymous=self.settings.anonymous == "viewer" or not tokens)
 
     def _bind(self, host: str, port: int) -> socket.socket:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -126,13 +126,13 @@ class HttpAdapter:
     async def __aenter__(self) -> HttpAdapter:
         if self._task is not None:
             raise RuntimeError("the HTTP adapter is already running")
-        host, port = parse_listen(self.model.listen)
+        host, port = parse_listen(self.settings.listen)
         auth = self._authenticator(host)
         app = create_app(
             self.gateway,
             auth,
             metrics_enabled=self.metrics_enabled,
-            cors_origins=tuple(self.model.cors_origins),
+            cors_origins=tuple(self.settings.cors_origins),
             streams=self._streams,
         )
         config = uvicorn.Config(
@@ -169,10 +169,10 @@ class HttpAdapter:
         log.info(
             "http.listening",
             url=self.url,
-            tokens=len(self.model.tokens),
+            tokens=len(self.settings.tokens),
             anonymous_reads=auth.anonymous,
             metrics=self.metrics_enabled,
-            cors=bool(self.model.cors_origins),
+            cors=bool(self.settings.cors_origins),
         )
         if self.demo and self.operator_token is not None:
             print(

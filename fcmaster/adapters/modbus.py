@@ -37,6 +37,7 @@ import asyncio
 import contextlib
 import ipaddress
 import socket
+from collections.abc import Sequence
 from types import TracebackType
 from typing import Any, Final
 
@@ -63,8 +64,9 @@ from fcmaster.adapters.modbus_map import (
     UnitMap,
     register_map,
 )
+from fcmaster.adapters.settings import ModbusSettings, modbus_listen
 from fcmaster.bus.commands import CommandResult
-from fcmaster.config import Config, ModbusModel, modbus_listen
+from fcmaster.bus.plan import LinePlan
 from fcmaster.errors import ConfigError, FcmasterError, UsageError
 
 log = structlog.get_logger("fcmaster.adapters.modbus")
@@ -98,26 +100,26 @@ class _Refused(FcmasterError):
 class ModbusAdapter:
     """Serves the register map while the context is entered.
 
-    Built by the service as ``ModbusAdapter(model, gateway, config=…)``; ``config`` gives
-    the drives' unit ids and monitored values.
+    Built by the service as ``ModbusAdapter(settings, gateway, lines=…)``; ``lines`` give
+    the drives and their monitored values, ``settings.units`` their unit ids.
     """
 
     def __init__(
         self,
-        model: ModbusModel,
+        settings: ModbusSettings,
         gateway: Gateway,
         *,
-        config: Config,
+        lines: Sequence[LinePlan],
         demo: bool = False,
         partial_frame_s: float = PARTIAL_FRAME_S,
         shutdown_grace_s: float = SHUTDOWN_GRACE_S,
     ) -> None:
-        self.model = model
+        self.settings = settings
         self.partial_frame_s = partial_frame_s
         self.shutdown_grace_s = shutdown_grace_s
         self.gateway = gateway
-        self.map = register_map(config)
-        self._allow = tuple(ipaddress.ip_network(n, strict=False) for n in model.allow or ())
+        self.map = register_map(lines, settings.units)
+        self._allow = tuple(ipaddress.ip_network(n, strict=False) for n in settings.allow or ())
         self._server: asyncio.Server | None = None
         self._connections: set[asyncio.Task[None]] = set()
         self._busy: set[asyncio.Task[None]] = set()  # answering a request right now
@@ -137,13 +139,13 @@ class ModbusAdapter:
         if self._server is not None:
             raise RuntimeError("the Modbus adapter is already running")
         self._closing = False
-        host, port = modbus_listen(self.model.listen)
+        host, port = modbus_listen(self.settings.listen)
         assert port is not None  # the config checked it
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         try:
             sock = socket.create_server((host, port), family=family, backlog=128)
         except OSError as exc:
-            reason = f"cannot listen on {self.model.listen}: {exc.strerror or exc}"
+            reason = f"cannot listen on {self.settings.listen}: {exc.strerror or exc}"
             raise ConfigError([("modbus.listen", reason)]) from exc
         bound = sock.getsockname()
         self._address = (str(bound[0]), int(bound[1]))
@@ -153,8 +155,8 @@ class ModbusAdapter:
             host=self._address[0],
             port=self._address[1],
             units=len(self.map.units),
-            commands=self.model.commands,
-            allow=self.model.allow or ["loopback"],
+            commands=self.settings.commands,
+            allow=self.settings.allow or ["loopback"],
         )
         return self
 
@@ -309,7 +311,7 @@ class ModbusAdapter:
 
     async def _write(self, unit: UnitMap, request: Request, actor: str) -> None:
         drive = unit.drive.name
-        if not self.model.commands:
+        if not self.settings.commands:
             self._refuse(actor, drive, "modbus.commands is false: the registers are read-only")
             raise _Refused(ExceptionCode.ILLEGAL_FUNCTION)
         if request.address + request.count > unit.size("holding"):

@@ -23,14 +23,12 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final
 
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.config import Config, modbus_units
-from fcmaster.errors import ConfigError
 from fcmaster.protocol.drive import pct_to_hz
 from fcmaster.protocol.registry import spec_for
 from fcmaster.state import DriveState
@@ -159,16 +157,12 @@ class RegisterMap:
         ]
 
 
-def register_map(config: Config) -> RegisterMap:
-    """The map of ``config``'s drives; ConfigError when two drives would share a unit id."""
-    problems: list[tuple[str, str]] = []
-    ids = modbus_units(config.model, problems)
-    if problems:
-        raise ConfigError(problems)
+def register_map(lines: Sequence[LinePlan], unit_ids: Mapping[str, int]) -> RegisterMap:
+    """The map of the drives of ``lines``, each at its unit id in ``unit_ids`` (by name)."""
     units = {}
-    for line in config.lines:
+    for line in lines:
         for drive in line.drives:
-            unit_id = ids[drive.name]
+            unit_id = unit_ids[drive.name]
             units[unit_id] = UnitMap(
                 unit_id=unit_id,
                 bus=line.name,

@@ -66,7 +66,7 @@ from fcmaster.adapters.mqtt_topics import (
     event_payload,
     is_significant,
 )
-from fcmaster.config import MqttModel
+from fcmaster.adapters.settings import MqttSettings
 from fcmaster.errors import ConfigError
 from fcmaster.hub import EventsDropped, Subscription
 from fcmaster.state import (
@@ -89,29 +89,29 @@ class MqttAdapter:
 
     def __init__(
         self,
-        model: MqttModel,
+        settings: MqttSettings,
         gateway: Gateway,
         *,
         demo: bool = False,
         tokens: Iterable[tuple[str, str, str]] = (),
     ) -> None:
-        """Bridge ``gateway`` to the broker ``model`` names; ConfigError for bad settings.
+        """Bridge ``gateway`` to the broker ``settings`` names; ConfigError for bad settings.
 
         ``demo`` changes nothing here. The gateway's clock paces the heartbeat and the
         reconnect backoff and stamps events. ``tokens`` are ``http.tokens`` as ``(name, role,
         secret)``: with ``mqtt.commands`` on, a command carries one of the operator ones.
         """
-        self._model = model
+        self._settings = settings
         self._gateway = gateway
         self._clock = gateway.clock
-        self._topics = Topics(model.base_topic, model.status_topic)
+        self._topics = Topics(settings.base_topic, settings.status_topic)
         self.client_id = (
-            model.client_id or f"fcmaster-{socket.gethostname()}-{secrets.token_hex(3)}"
+            settings.client_id or f"fcmaster-{socket.gethostname()}-{secrets.token_hex(3)}"
         )
-        parts = urlsplit(model.url)
+        parts = urlsplit(settings.url)
         self._host = parts.hostname or ""
         self._port = parts.port or (8883 if parts.scheme == "mqtts" else 1883)
-        self._tls = _tls_context(model) if parts.scheme == "mqtts" else None
+        self._tls = _tls_context(settings) if parts.scheme == "mqtts" else None
         self._buses = [line.name for line in gateway.lines()]
         for name in [*self._buses, *(state.name for state in gateway.fleet.snapshot())]:
             if not name or set(name) & {"/", "+", "#"}:
@@ -119,10 +119,10 @@ class MqttAdapter:
         self._discovery = (
             Discovery(
                 self._topics,
-                model.discovery_prefix,
-                controls=model.commands and model.trust_broker,
+                settings.discovery_prefix,
+                controls=settings.commands and settings.trust_broker,
             )
-            if model.discovery
+            if settings.discovery
             else None
         )
         self._discovered: set[tuple[str, str]] = set()
@@ -139,7 +139,9 @@ class MqttAdapter:
             self._topics,
             self._outbox,
             actor=self.actor,
-            policy=CommandPolicy(enabled=model.commands, auth=None if model.trust_broker else auth),
+            policy=CommandPolicy(
+                enabled=settings.commands, auth=None if settings.trust_broker else auth
+            ),
         )
         self._tasks: list[asyncio.Task[None]] = []
         self._subscription: Subscription | None = None
@@ -169,7 +171,7 @@ class MqttAdapter:
         ]
         for task in self._tasks:
             task.add_done_callback(_report_crash)
-        log.info("mqtt.started", url=self._model.url, client_id=self.client_id)
+        log.info("mqtt.started", url=self._settings.url, client_id=self.client_id)
         return self
 
     async def __aexit__(
@@ -221,7 +223,7 @@ class MqttAdapter:
 
     async def _heartbeat(self) -> None:
         while True:
-            await self._clock.sleep(self._model.heartbeat_s)
+            await self._clock.sleep(self._settings.heartbeat_s)
             for state in self._gateway.fleet.snapshot():
                 self._file_state(state, force=True)
 
@@ -246,7 +248,7 @@ class MqttAdapter:
                 plan.nominal_frequency_hz if plan is not None else 50.0
             )
         return is_significant(
-            sent, state, deadband_pct=self._model.deadband_pct, nominal_frequency_hz=nominal_hz
+            sent, state, deadband_pct=self._settings.deadband_pct, nominal_frequency_hz=nominal_hz
         )
 
     def _file_discovery(self, discovery: Discovery, state: DriveState) -> None:
@@ -283,21 +285,21 @@ class MqttAdapter:
                 log.exception("mqtt.session_failed")
             if self.connections > sessions:
                 attempt = 0
-            delay = min(self._model.reconnect_max_s, self._model.reconnect_min_s * 2**attempt)
+            delay = min(self._settings.reconnect_max_s, self._settings.reconnect_min_s * 2**attempt)
             attempt += 1
             await self._clock.sleep(delay * self._rng.uniform(0.5, 1.0))
 
     def _client(self) -> aiomqtt.Client:
-        model = self._model
+        settings = self._settings
         client = aiomqtt.Client(
             self._host,
             self._port,
             identifier=self.client_id,
-            username=model.username,
-            password=model.password,
+            username=settings.username,
+            password=settings.password,
             will=aiomqtt.Will(self._topics.status, OFFLINE, qos=1, retain=True),
             clean_session=True,  # commands queued while we were away are not replayed
-            keepalive=model.keepalive_s,
+            keepalive=settings.keepalive_s,
             tls_context=self._tls,
             # small packets (a PUBACK, then the result) must not wait for a delayed ACK
             socket_options=((socket.IPPROTO_TCP, socket.TCP_NODELAY, 1),),
@@ -350,9 +352,9 @@ def _refused(code: int | ReasonCode) -> bool:
     return code.is_failure if isinstance(code, ReasonCode) else code >= 0x80
 
 
-def _tls_context(model: MqttModel) -> ssl.SSLContext:
+def _tls_context(settings: MqttSettings) -> ssl.SSLContext:
     """A TLS context for mqtts:// with the configured CA, client certificate and key."""
-    tls = model.tls
+    tls = settings.tls
     try:
         context = ssl.create_default_context(cafile=tls.ca if tls is not None else None)
         if tls is not None and tls.cert is not None:

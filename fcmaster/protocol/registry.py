@@ -8,33 +8,52 @@ a bus without a ``protocol`` key.
 
 from __future__ import annotations
 
-from typing import Any, Final
+import importlib
+from collections.abc import Iterator, Mapping
+from typing import TYPE_CHECKING, Any, Final
 
 from fcmaster.errors import UsageError
-from fcmaster.protocol.danfoss_fc.spec import SPEC as DANFOSS_FC
-from fcmaster.protocol.enc.spec import SPEC as ENC
-from fcmaster.protocol.mitsubishi.spec import SPEC as MITSUBISHI
-from fcmaster.protocol.spec import LineKey, ProtocolSpec
 
-PROTOCOLS: Final[dict[str, ProtocolSpec[Any]]] = {
-    spec.name: spec
-    for spec in (
-        DANFOSS_FC,
-        MITSUBISHI,
-        ENC,
-    )
+if TYPE_CHECKING:
+    from fcmaster.protocol.spec import LineKey, ProtocolSpec
+
+# A protocol's name and the module whose ``SPEC`` describes it. A spec is imported the first
+# time it is asked for, so what needs only the names (a LinePlan's default, the choices of
+# --protocol) does not load every codec.
+_SPEC_MODULES: Final = {
+    "danfoss-fc": "fcmaster.protocol.danfoss_fc.spec",
+    "mitsubishi": "fcmaster.protocol.mitsubishi.spec",
+    "enc": "fcmaster.protocol.enc.spec",
 }
-NAMES: Final = tuple(PROTOCOLS)  # in registry order: the choices of --protocol
+NAMES: Final = tuple(_SPEC_MODULES)  # in registry order: the choices of --protocol
 DEFAULT: Final = NAMES[0]
+
+
+class _Specs(Mapping[str, "ProtocolSpec[Any]"]):
+    """Every protocol's spec by name, in registry order, each imported on first use."""
+
+    def __getitem__(self, name: str) -> ProtocolSpec[Any]:
+        spec: ProtocolSpec[Any] = importlib.import_module(_SPEC_MODULES[name]).SPEC
+        if spec.name != name:
+            raise ImportError(f"{_SPEC_MODULES[name]}.SPEC is named {spec.name!r}, not {name!r}")
+        return spec
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(NAMES)
+
+    def __len__(self) -> int:
+        return len(NAMES)
+
+
+PROTOCOLS: Final[Mapping[str, ProtocolSpec[Any]]] = _Specs()
 
 
 def spec_for(name: str) -> ProtocolSpec[Any]:
     """The spec of protocol ``name``; UsageError naming the known ones if there is none."""
-    try:
-        return PROTOCOLS[name]
-    except KeyError:
+    if name not in _SPEC_MODULES:
         known = ", ".join(NAMES)
-        raise UsageError(f"protocol {name!r} is not supported (have: {known})") from None
+        raise UsageError(f"protocol {name!r} is not supported (have: {known})")
+    return PROTOCOLS[name]
 
 
 def line_keys() -> tuple[tuple[LineKey, ProtocolSpec[Any]], ...]:

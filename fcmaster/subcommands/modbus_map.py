@@ -12,16 +12,16 @@ from fcmaster.adapters.modbus_map import ACTIONS, register_map
 def run(path: Path, *, as_json: bool) -> int:
     """Print the map of ``path``'s drives (JSON: one object per value)."""
     config = config_module.load(path)
-    mapping = register_map(config)
+    mapping = register_map(config.lines, config.modbus_units())
     if as_json:
         print(json.dumps(mapping.entries(), indent=2, ensure_ascii=False))
         return 0
-    model = config.model.modbus
-    if model is None:
+    settings = config.modbus
+    if settings is None:
         print("modbus: no such section in this config: the server is off (this is its map)")
     else:
-        access = "commands on" if model.commands else "read-only (modbus.commands: false)"
-        print(f"modbus: {model.listen}, {access}")
+        access = "commands on" if settings.commands else "read-only (modbus.commands: false)"
+        print(f"modbus: {settings.listen}, {access}")
     print(
         "Addresses count from 0 as on the wire; a PLC or SCADA that counts from 1 adds 1\n"
         "(input register 0 = 30001, holding register 0 = 40001). 32-bit values put the\n"

@@ -17,7 +17,7 @@ import httpx
 
 from fcmaster import config
 from fcmaster.adapters.http import HttpAdapter
-from fcmaster.config import HttpModel, TokenModel
+from fcmaster.adapters.settings import HttpSettings, Token
 from fcmaster.service import Service
 from tests.integration.gateway_double import FakeGateway
 
@@ -27,26 +27,26 @@ OPERATOR = {"Authorization": f"Bearer {OPERATOR_TOKEN}"}
 VIEWER = {"Authorization": f"Bearer {VIEWER_TOKEN}"}
 
 
-def http_model(**overrides: Any) -> HttpModel:
-    """An ``http:`` section on an ephemeral loopback port with a viewer and an operator."""
+def http_settings(**overrides: Any) -> HttpSettings:
+    """HTTP settings on an ephemeral loopback port with a viewer and an operator token."""
     fields: dict[str, Any] = {
         "listen": "127.0.0.1:0",
-        "tokens": [
-            TokenModel(name="ops", role="operator", token=OPERATOR_TOKEN),
-            TokenModel(name="scada", role="viewer", token=VIEWER_TOKEN),
-        ],
+        "tokens": (
+            Token(name="ops", role="operator", secret=OPERATOR_TOKEN),
+            Token(name="scada", role="viewer", secret=VIEWER_TOKEN),
+        ),
     }
     fields.update(overrides)
-    return HttpModel(**fields)
+    return HttpSettings(**fields)
 
 
 @asynccontextmanager
 async def serving(
-    gateway: FakeGateway, model: HttpModel | None = None, **options: Any
+    gateway: FakeGateway, settings: HttpSettings | None = None, **options: Any
 ) -> AsyncIterator[HttpAdapter]:
     """The HTTP adapter over ``gateway``, listening until the block ends (bounded)."""
     async with asyncio.timeout(10):
-        adapter = HttpAdapter(model or http_model(), gateway, **options)
+        adapter = HttpAdapter(settings or http_settings(), gateway, **options)
         await adapter.__aenter__()
     try:
         yield adapter

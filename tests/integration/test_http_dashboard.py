@@ -36,7 +36,7 @@ from fcmaster.subcommands.daemon import with_http_listen
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
     OPERATOR_TOKEN,
-    http_model,
+    http_settings,
     serving,
     wait_until_listening,
 )
@@ -84,7 +84,7 @@ async def _open(
 async def test_the_dashboard_lists_the_fleet_and_follows_changes_live(browser: Browser) -> None:
     gateway = FakeGateway()
     gateway.reply("pump-1", running=False, hz=0.0, value=("16-14", 0.0, "A"))
-    async with serving(gateway, http_model(anonymous="viewer")) as adapter:
+    async with serving(gateway, http_settings(anonymous="viewer")) as adapter:
         page, problems = await _open(browser, adapter.url + "/")
         rows = page.locator("#drives tbody tr")
         await expect(rows).to_have_count(2)
@@ -124,7 +124,7 @@ async def test_a_line_card_names_its_usb_adapter_and_flags_a_slow_latency_timer(
         "by_path": None,
         "latency_ms": 16,
     }
-    async with serving(gateway, http_model(anonymous="viewer")) as adapter:
+    async with serving(gateway, http_settings(anonymous="viewer")) as adapter:
         page, problems = await _open(browser, adapter.url + "/")
         shown = page.locator('[data-bus="line1"]').get_by_test_id("adapter")
         await expect(shown).to_have_text(

@@ -22,7 +22,7 @@ from fcmaster.adapters.http_guard import ConnectionGuard
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.clock import MonotonicClock
 from tests.integration.gateway_double import FakeGateway
-from tests.integration.http_harness import OPERATOR, VIEWER, http_model
+from tests.integration.http_harness import OPERATOR, VIEWER, http_settings
 
 LIMIT_S = 30.0
 Socket = tuple[asyncio.StreamReader, asyncio.StreamWriter]
@@ -41,7 +41,7 @@ async def _close_sockets() -> AsyncIterator[None]:
 
 @asynccontextmanager
 async def guarded(gateway: FakeGateway, guard: ConnectionGuard) -> AsyncIterator[HttpAdapter]:
-    adapter = HttpAdapter(http_model(), gateway)
+    adapter = HttpAdapter(http_settings(), gateway)
     adapter.guard = guard
     async with asyncio.timeout(LIMIT_S), adapter:
         yield adapter

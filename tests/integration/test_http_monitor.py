@@ -11,7 +11,7 @@ from fcmaster.cli import COMMANDS, build_parser
 from fcmaster.errors import FcmasterError, UsageError
 from fcmaster.subcommands.monitor import Fleet, render_table, run, stream_url
 from tests.integration.gateway_double import FakeGateway
-from tests.integration.http_harness import VIEWER_TOKEN, http_model, serving
+from tests.integration.http_harness import VIEWER_TOKEN, http_settings, serving
 from tests.integration.ports import free_port
 
 
@@ -124,7 +124,7 @@ def test_the_table_marks_offline_and_disconnected_and_fits_the_width() -> None:
 
 
 async def test_the_monitor_can_share_a_model_with_anonymous_reads() -> None:
-    async with serving(FakeGateway(), http_model(anonymous="viewer")) as adapter:
+    async with serving(FakeGateway(), http_settings(anonymous="viewer")) as adapter:
         out = io.StringIO()
         async with asyncio.timeout(10):
             assert await run(adapter.url, None, once=True, out=out) == 0

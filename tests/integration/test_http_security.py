@@ -16,7 +16,7 @@ from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
     OPERATOR,
     VIEWER,
-    http_model,
+    http_settings,
     serving,
 )
 
@@ -102,7 +102,7 @@ async def test_anonymous_viewer_reads_on_loopback_but_cannot_command(
     gateway: FakeGateway,
 ) -> None:
     async with (
-        serving(gateway, http_model(anonymous="viewer")) as adapter,
+        serving(gateway, http_settings(anonymous="viewer")) as adapter,
         httpx.AsyncClient(base_url=adapter.url) as client,
     ):
         assert (await client.get("/api/v1/drives")).status_code == 200
@@ -120,7 +120,7 @@ async def test_anonymous_viewer_reads_on_loopback_but_cannot_command(
 
 async def test_without_tokens_the_api_is_read_only(gateway: FakeGateway) -> None:
     async with (
-        serving(gateway, http_model(tokens=[])) as adapter,
+        serving(gateway, http_settings(tokens=())) as adapter,
         httpx.AsyncClient(base_url=adapter.url) as client,
     ):
         assert (await client.get("/api/v1/drives")).status_code == 200
@@ -130,7 +130,7 @@ async def test_without_tokens_the_api_is_read_only(gateway: FakeGateway) -> None
 
 
 async def test_without_tokens_only_loopback_may_be_listened_on(gateway: FakeGateway) -> None:
-    adapter = HttpAdapter(http_model(tokens=[], listen="0.0.0.0:0"), gateway)
+    adapter = HttpAdapter(http_settings(tokens=(), listen="0.0.0.0:0"), gateway)
     with pytest.raises(ConfigError) as caught:
         await adapter.__aenter__()
     assert caught.value.problems[0][0] == "http.listen"
@@ -146,8 +146,8 @@ async def test_cors_is_off_by_default_and_on_for_configured_origins(
     }
     response = await client.options("/api/v1/drives/pump-1/commands", headers=preflight)
     assert "access-control-allow-origin" not in response.headers
-    model = http_model(cors_origins=["http://scada.example"])
-    async with serving(gateway, model) as adapter, httpx.AsyncClient(base_url=adapter.url) as c:
+    settings = http_settings(cors_origins=("http://scada.example",))
+    async with serving(gateway, settings) as adapter, httpx.AsyncClient(base_url=adapter.url) as c:
         response = await c.options("/api/v1/drives/pump-1/commands", headers=preflight)
         assert response.headers["access-control-allow-origin"] == "http://scada.example"
 
@@ -156,7 +156,7 @@ async def test_the_demo_makes_up_an_operator_token_and_prints_it(
     gateway: FakeGateway, capsys: pytest.CaptureFixture[str]
 ) -> None:
     async with (
-        serving(gateway, http_model(tokens=[], anonymous="viewer"), demo=True) as adapter,
+        serving(gateway, http_settings(tokens=(), anonymous="viewer"), demo=True) as adapter,
         httpx.AsyncClient(base_url=adapter.url) as client,
     ):
         token = adapter.operator_token
@@ -176,7 +176,7 @@ async def test_the_demo_makes_up_an_operator_token_and_prints_it(
 async def test_a_port_in_use_is_a_config_error_naming_http_listen(gateway: FakeGateway) -> None:
     async with serving(gateway) as first:
         taken = first.url.removeprefix("http://")
-        second = HttpAdapter(http_model(listen=taken), gateway)
+        second = HttpAdapter(http_settings(listen=taken), gateway)
         with pytest.raises(ConfigError) as caught:
             await second.__aenter__()
         assert caught.value.problems[0][0] == "http.listen"

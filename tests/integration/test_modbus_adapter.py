@@ -14,8 +14,9 @@ import pytest
 from structlog.testing import capture_logs
 
 from fcmaster.adapters.modbus import ModbusAdapter
+from fcmaster.adapters.settings import ModbusSettings
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
-from fcmaster.config import ModbusModel, parse
+from fcmaster.config import parse
 from fcmaster.protocol.codec import DriveError
 from tests.fakes import WallShiftedClock
 from tests.integration.gateway_double import FakeGateway, Respond, done
@@ -46,8 +47,8 @@ async def serving(
     config = parse(CONFIG)
     clock = None if wall is None else WallShiftedClock(wall)
     gateway = FakeGateway(config.lines, respond, clock=clock)
-    model = ModbusModel(listen="127.0.0.1:0", commands=commands)
-    adapter = ModbusAdapter(model, gateway, config=config, partial_frame_s=partial_frame_s)
+    settings = ModbusSettings(listen="127.0.0.1:0", commands=commands, units=config.modbus_units())
+    adapter = ModbusAdapter(settings, gateway, lines=config.lines, partial_frame_s=partial_frame_s)
     async with asyncio.timeout(LIMIT_S), adapter:
         yield gateway, adapter
 
@@ -257,8 +258,8 @@ async def test_a_frame_split_into_single_bytes_is_still_one_request() -> None:
 async def test_shutdown_ends_idle_clients_at_once_and_answers_a_pending_write_0x0a() -> None:
     gate = Gate()
     config = parse(CONFIG)
-    model = ModbusModel(listen="127.0.0.1:0", commands=True)
-    adapter = ModbusAdapter(model, FakeGateway(config.lines, gate), config=config,
+    settings = ModbusSettings(listen="127.0.0.1:0", commands=True, units=config.modbus_units())
+    adapter = ModbusAdapter(settings, FakeGateway(config.lines, gate), lines=config.lines,
                             shutdown_grace_s=0.3)  # fmt: skip
     loop = asyncio.get_running_loop()
     async with asyncio.timeout(LIMIT_S):
@@ -323,8 +324,8 @@ async def test_random_bytes_from_many_clients_never_take_the_server_down() -> No
 async def test_shutdown_lets_a_write_finish_within_the_grace_and_answers_it() -> None:
     gate = Gate()
     config = parse(CONFIG)
-    model = ModbusModel(listen="127.0.0.1:0", commands=True)
-    adapter = ModbusAdapter(model, FakeGateway(config.lines, gate), config=config,
+    settings = ModbusSettings(listen="127.0.0.1:0", commands=True, units=config.modbus_units())
+    adapter = ModbusAdapter(settings, FakeGateway(config.lines, gate), lines=config.lines,
                             shutdown_grace_s=10.0)  # fmt: skip
     loop = asyncio.get_running_loop()
     async with asyncio.timeout(LIMIT_S):

@@ -12,8 +12,9 @@ import pytest
 from structlog.testing import capture_logs
 
 from fcmaster.adapters.mqtt import MqttAdapter
+from fcmaster.adapters.settings import MqttSettings
 from fcmaster.bus.commands import Command, CommandResult, Outcome
-from fcmaster.config import MqttModel, parse
+from fcmaster.config import parse
 from fcmaster.protocol.codec import DriveError
 from fcmaster.service import Service
 from tests.integration.mosquitto import Broker, Recorder
@@ -39,8 +40,8 @@ async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
         yield running
 
 
-def model(broker: Broker) -> MqttModel:
-    return MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True, trust_broker=True)
+def model(broker: Broker) -> MqttSettings:
+    return MqttSettings(url=broker.url, reconnect_min_s=0.05, commands=True, trust_broker=True)
 
 
 async def test_commands_reach_the_simulated_drive_and_answer_with_their_id(

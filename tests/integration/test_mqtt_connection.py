@@ -12,7 +12,8 @@ import pytest
 from structlog.testing import capture_logs
 
 from fcmaster.adapters.mqtt import MqttAdapter
-from fcmaster.config import MqttModel, TlsModel, parse
+from fcmaster.adapters.settings import MqttSettings, TlsSettings
+from fcmaster.config import parse
 from fcmaster.errors import ConfigError
 from fcmaster.service import Service
 from tests.integration.mosquitto import Broker, Recorder, payload_text
@@ -116,7 +117,7 @@ def test_unreadable_certificates_are_a_config_error(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as caught:  # `check` says so, as `run` would
         parse(CONFIG.replace("URL", "mqtts://127.0.0.1:8883") + f"  tls: {{ca: {missing}}}\n")
     assert caught.value.problems == [("mqtt.tls.ca", f"cannot read {missing}")]
-    model = MqttModel(url="mqtts://127.0.0.1:8883", tls=TlsModel(ca=str(missing)))
+    model = MqttSettings(url="mqtts://127.0.0.1:8883", tls=TlsSettings(ca=str(missing)))
     with pytest.raises(ConfigError, match=r"mqtt\.tls"):
         MqttAdapter(model, FakeGateway())
 

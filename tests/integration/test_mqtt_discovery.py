@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from fcmaster.adapters.mqtt import MqttAdapter
-from fcmaster.config import MqttModel
+from fcmaster.adapters.settings import MqttSettings
 from tests.integration.mosquitto import Broker, Recorder, payload_text
 from tests.integration.mqtt_gateway import FakeGateway
 
@@ -37,7 +37,7 @@ def entities(client: Recorder, pattern: str) -> dict[str, Any]:
 
 async def test_each_drive_is_a_device_and_only_bus_drives_get_controls(broker: Broker) -> None:
     gateway = FakeGateway()
-    settings = MqttModel(
+    settings = MqttSettings(
         url=broker.url, discovery=True, reconnect_min_s=0.05, commands=True, trust_broker=True
     )
     async with (

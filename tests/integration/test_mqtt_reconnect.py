@@ -8,7 +8,8 @@ import sys
 from pathlib import Path
 
 from fcmaster.adapters.mqtt import MqttAdapter
-from fcmaster.config import MqttModel, parse
+from fcmaster.adapters.settings import MqttSettings
+from fcmaster.config import parse
 from fcmaster.service import Service
 from tests.integration.mosquitto import Broker, Recorder, payload_text
 from tests.integration.mqtt_gateway import FakeGateway, Gate
@@ -71,7 +72,7 @@ async def test_no_command_is_left_without_a_result_across_a_broker_restart(
     results = "fcmaster/+/+/command/result"
     try:
         async with asyncio.timeout(LIMIT_S):
-            adapter = MqttAdapter(MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True,
+            adapter = MqttAdapter(MqttSettings(url=broker.url, reconnect_min_s=0.05, commands=True,
                                             trust_broker=True, reconnect_max_s=0.2),
                                   gateway)  # fmt: skip
             async with adapter:
@@ -103,7 +104,7 @@ async def test_the_bridge_keeps_trying_while_there_is_no_broker(tmp_path: Path) 
     gateway.reply("pump-1")
     async with asyncio.timeout(LIMIT_S):
         adapter = MqttAdapter(
-            MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True, trust_broker=True),
+            MqttSettings(url=broker.url, reconnect_min_s=0.05, commands=True, trust_broker=True),
             gateway,
         )
         async with adapter:

@@ -10,7 +10,8 @@ from typing import Any
 import pytest
 
 from fcmaster.adapters.mqtt import MqttAdapter
-from fcmaster.config import MqttModel, parse
+from fcmaster.adapters.settings import MqttSettings
+from fcmaster.config import parse
 from fcmaster.service import Service
 from tests.fakes import WallShiftedClock
 from tests.integration.mosquitto import Broker, Recorder, payload_text
@@ -57,9 +58,9 @@ async def settle() -> None:
         await asyncio.sleep(0)
 
 
-def model(broker: Broker, **overrides: Any) -> MqttModel:
+def model(broker: Broker, **overrides: Any) -> MqttSettings:
     settings: dict[str, Any] = {"url": broker.url, "reconnect_min_s": 0.05}
-    return MqttModel(**{**settings, **overrides})
+    return MqttSettings(**{**settings, **overrides})
 
 
 async def test_every_drive_has_retained_state_and_availability(broker: Broker) -> None:

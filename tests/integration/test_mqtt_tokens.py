@@ -17,7 +17,8 @@ import pytest
 from structlog.testing import capture_logs
 
 from fcmaster.adapters.mqtt import MqttAdapter
-from fcmaster.config import MqttModel, parse
+from fcmaster.adapters.settings import MqttSettings
+from fcmaster.config import parse
 from fcmaster.errors import ConfigError
 from fcmaster.service import Service
 from tests.integration.mosquitto import Broker, Recorder
@@ -36,7 +37,9 @@ async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
         yield running
 
 
-async def _one(broker: Broker, model: MqttModel, payload: dict[str, Any]) -> tuple[Any, Any, Any]:
+async def _one(
+    broker: Broker, model: MqttSettings, payload: dict[str, Any]
+) -> tuple[Any, Any, Any]:
     gateway = FakeGateway()
     async with (
         asyncio.timeout(LIMIT_S),
@@ -50,7 +53,7 @@ async def _one(broker: Broker, model: MqttModel, payload: dict[str, Any]) -> tup
 
 
 async def test_commands_are_off_unless_switched_on(broker: Broker) -> None:
-    model = MqttModel(url=broker.url, reconnect_min_s=0.05)
+    model = MqttSettings(url=broker.url, reconnect_min_s=0.05)
     assert model.commands is False
     result, executed, _ = await _one(broker, model, {"id": 1, "action": "start", "token": OPERATOR})
     assert (result["id"], result["outcome"]) == (1, "not_allowed")
@@ -72,7 +75,7 @@ async def test_commands_are_off_unless_switched_on(broker: Broker) -> None:
 async def test_a_command_without_an_operator_token_is_not_allowed(
     broker: Broker, token: Any, reason: str
 ) -> None:
-    model = MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True)
+    model = MqttSettings(url=broker.url, reconnect_min_s=0.05, commands=True)
     payload: dict[str, Any] = {"id": "c", "action": "start", "frequency_hz": 20}
     if token is not None:
         payload["token"] = token
@@ -86,7 +89,7 @@ async def test_a_command_without_an_operator_token_is_not_allowed(
 
 
 async def test_an_operator_token_lets_the_command_through_in_its_name(broker: Broker) -> None:
-    model = MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True)
+    model = MqttSettings(url=broker.url, reconnect_min_s=0.05, commands=True)
     payload = {"id": 7, "action": "set_reference", "frequency_hz": 20, "token": OPERATOR}
     result, executed, logs = await _one(broker, model, payload)
     assert (result["id"], result["outcome"]) == (7, "done")
@@ -96,7 +99,7 @@ async def test_an_operator_token_lets_the_command_through_in_its_name(broker: Br
 
 
 async def test_trusting_the_broker_takes_commands_without_a_token(broker: Broker) -> None:
-    model = MqttModel(url=broker.url, reconnect_min_s=0.05, commands=True, trust_broker=True)
+    model = MqttSettings(url=broker.url, reconnect_min_s=0.05, commands=True, trust_broker=True)
     result, executed, _ = await _one(broker, model, {"id": 2, "action": "stop"})
     assert result["outcome"] == "done"
     assert executed[0][1].actor.startswith("mqtt:")

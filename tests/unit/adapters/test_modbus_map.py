@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from fcmaster.adapters.modbus import EXCEPTION_OF
 from fcmaster.adapters.modbus_frames import ExceptionCode
-from fcmaster.adapters.modbus_map import Register, register_map
+from fcmaster.adapters.modbus_map import Register, RegisterMap, register_map
 from fcmaster.bus.commands import Outcome
 from fcmaster.config import parse
 from fcmaster.errors import ConfigError
@@ -33,8 +33,14 @@ buses:
 """
 
 
+def _map(text: str) -> RegisterMap:
+    """The register map of the config ``text``, unit ids as the config gives them."""
+    config = parse(text)
+    return register_map(config.lines, config.modbus_units())
+
+
 def test_every_unit_has_the_state_block_then_its_monitored_values() -> None:
-    entries = register_map(parse(CONFIG)).entries()
+    entries = _map(CONFIG).entries()
     pump = [e for e in entries if e["unit_id"] == 1]
     assert [(e["table"], e["address"], e["name"], e["type"]) for e in pump[:3]] == [
         ("input", 0, "online", "u16"),
@@ -65,7 +71,7 @@ def test_every_unit_has_the_state_block_then_its_monitored_values() -> None:
 def test_two_drives_on_one_unit_id_are_refused_with_the_keys() -> None:
     clash = CONFIG.replace(", modbus_unit: 21", "")
     with pytest.raises(ConfigError) as info:
-        register_map(parse(clash))
+        _map(clash)
     ((path, reason),) = info.value.problems
     assert path == "buses[1].drives[0].modbus_unit"
     assert "pump-1 (buses[0].drives[0].address)" in reason
@@ -80,7 +86,7 @@ ONLINE = DriveState(
 
 
 def words(state: DriveState, now: float = 1001.25) -> list[int]:
-    unit = register_map(parse(CONFIG)).units[1]
+    unit = _map(CONFIG).units[1]
     return unit.words("input", state, now)
 
 
@@ -91,7 +97,7 @@ def test_values_are_scaled_and_32_bit_ones_put_the_high_word_first() -> None:
     assert struct.unpack(">f", struct.pack(">HH", *w[16:18]))[0] == 12.5
     assert w[18:20] == [0, 125]
     assert w[22:24] == [0x8000, 0x0000]  # bit 31 of an alarm word: the bits as sent
-    holding = register_map(parse(CONFIG)).units[1].words("holding", ONLINE, 0.0)
+    holding = _map(CONFIG).units[1].words("holding", ONLINE, 0.0)
     assert holding == [0, 4500]  # 75 % of 60 Hz
 
 
