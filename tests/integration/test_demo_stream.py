@@ -55,7 +55,24 @@ async def test_with_the_demo_steady_no_update_repeats_a_state_before_the_heartbe
         async with connect(f"ws://127.0.0.1:{port}/api/v1/stream") as ws:
             snapshot = json.loads(await ws.recv())
             assert snapshot["type"] == "snapshot"
-            await asyncio.sleep(1.0)  # past adoption and the first condition reads
+            # Steady: past adoption, the first condition reads and the watchdog audit, whose
+            # verdicts are published as they are found; what the stream carried until then
+            # is not the steady state this test watches.
+            await service.hub.wait_for(
+                lambda: all(
+                    drive.watchdog is not None
+                    for drive in service.fleet.snapshot()
+                    if drive.control == "bus"
+                ),
+                timeout_s=60,
+            )
+            await asyncio.sleep(1.0)
+            while True:
+                try:
+                    async with asyncio.timeout(0.05):
+                        await ws.recv()
+                except TimeoutError:
+                    break
             replies_before = sum(line.stats.get("replies", 0) for line in service.lines())
             loop = asyncio.get_running_loop()
             until = loop.time() + WATCH_S
