@@ -32,6 +32,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any, Generic, TypeVar
 
 from fcmaster.protocol.codec import DriveCodec, ParameterKey
@@ -120,6 +121,18 @@ class ParameterTables:
     changeable_while_running: frozenset[str]  # known from the manuals; all others: stopped
     link_settings: frozenset[str]  # address, baud, parity, protocol: never restored
     unit_of: Callable[[ParameterKey], str]  # the unit its values come in, as read
+
+    @classmethod
+    def of(cls, tables: ModuleType, unit_of: Callable[[ParameterKey], str]) -> ParameterTables:
+        """The tables of a vendor's ``parameters`` module, where every vendor names them alike."""
+        return cls(
+            set_members=tables.SET_MEMBERS,
+            identity=tables.IDENTITY,
+            identity_match=tables.IDENTITY_MATCH,
+            changeable_while_running=tables.CHANGEABLE_WHILE_RUNNING,
+            link_settings=tables.LINK_SETTINGS,
+            unit_of=unit_of,
+        )
 
 
 # A frame → its fields, JSON-ready; ``from_drive``: a reply rather than a request.

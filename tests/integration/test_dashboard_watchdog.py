@@ -8,51 +8,59 @@ reports; a monitor-only drive says the gateway does not command it.
 from __future__ import annotations
 
 import asyncio
-import os
 from collections.abc import AsyncIterator
-from pathlib import Path
+from contextlib import asynccontextmanager
 
 import pytest
-from playwright.async_api import Browser, async_playwright, expect
+from playwright.async_api import Browser, Page, expect
 
 from fcmaster.cli import DEMO_CONFIG
+from fcmaster.config import Config
 from fcmaster.config import load as load_config
 from fcmaster.config import parse as parse_config
 from fcmaster.service import Service
 from fcmaster.subcommands.daemon import with_http_listen
+from tests.integration.browser_harness import chromium, chromium_marks, press
 from tests.integration.http_harness import wait_until_listening
 from tests.integration.ports import free_port
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run"]
-
-if not Path(CHROMIUM).exists():
-    if os.environ.get("CI") == "true":
-        raise RuntimeError(f"the dashboard tests need {CHROMIUM} (apt package chromium)")
-    pytestmark = pytest.mark.skip(reason=f"needs {CHROMIUM}")
+pytestmark = chromium_marks()
 
 
 @pytest.fixture
 async def browser() -> AsyncIterator[Browser]:
-    async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            yield browser
-        finally:
-            await browser.close()
+    async with chromium() as browser:
+        yield browser
 
 
-async def test_the_drive_view_shows_the_watchdog_verdicts_of_the_demo(browser: Browser) -> None:
-    port = free_port()
+@asynccontextmanager
+async def _dashboard(
+    browser: Browser, config: Config, port: int, *, demo: bool = False
+) -> AsyncIterator[tuple[Page, list[str]]]:
+    """The daemon serving ``config`` and its dashboard open in a page; the page's errors."""
     url = f"http://127.0.0.1:{port}"
-    service = Service(with_http_listen(load_config(DEMO_CONFIG), f"127.0.0.1:{port}"), demo=True)
-    task = asyncio.create_task(service.run(install_signals=False), name="test.demo")
+    service = Service(config, demo=demo)
+    task = asyncio.create_task(service.run(install_signals=False), name="test.dashboard")
     try:
         await wait_until_listening(url, timeout_s=30)
         page = await browser.new_page(viewport={"width": 1280, "height": 900})
         problems: list[str] = []
         page.on("pageerror", lambda error: problems.append(str(error)))
         await page.goto(url + "/")
+        yield page, problems
+    finally:
+        service.stop()
+        async with asyncio.timeout(10):
+            await task
+
+
+def _demo(port: int) -> Config:
+    return with_http_listen(load_config(DEMO_CONFIG), f"127.0.0.1:{port}")
+
+
+async def test_the_drive_view_shows_the_watchdog_verdicts_of_the_demo(browser: Browser) -> None:
+    port = free_port()
+    async with _dashboard(browser, _demo(port), port, demo=True) as (page, problems):
         expected = {
             "supply-pump-2": "too_short — timeout 0.1 s, action stop and trip",
             "supply-pump-1": "ok — timeout 2 s, action stop",
@@ -61,28 +69,19 @@ async def test_the_drive_view_shows_the_watchdog_verdicts_of_the_demo(browser: B
             "extractor-1": "monitor only",
         }
         for name, text in expected.items():
-            await page.locator(f'tr[data-drive="{name}"]').get_by_test_id("open").click()
+            row = page.locator(f'tr[data-drive="{name}"]')
+            # a person reads the table first: the row shows its verdict badge (or none)
+            await expect(row.get_by_test_id("watchdog")).not_to_have_text("watchdog –")
+            await press(page, row.get_by_test_id("open"))
             await expect(page.get_by_test_id("dv-watchdog")).to_contain_text(text, timeout=20000)
             await page.go_back()
             await expect(page.get_by_test_id("drives")).to_be_visible()
         assert problems == []
-    finally:
-        service.stop()
-        async with asyncio.timeout(10):
-            await task
 
 
 async def test_the_fleet_table_marks_every_watchdog_verdict_of_the_demo(browser: Browser) -> None:
     port = free_port()
-    url = f"http://127.0.0.1:{port}"
-    service = Service(with_http_listen(load_config(DEMO_CONFIG), f"127.0.0.1:{port}"), demo=True)
-    task = asyncio.create_task(service.run(install_signals=False), name="test.demo")
-    try:
-        await wait_until_listening(url, timeout_s=30)
-        page = await browser.new_page(viewport={"width": 1280, "height": 900})
-        problems: list[str] = []
-        page.on("pageerror", lambda error: problems.append(str(error)))
-        await page.goto(url + "/")
+    async with _dashboard(browser, _demo(port), port, demo=True) as (page, problems):
         # what demo.yaml's comments say each drive has (each set up by its simulation)
         expected = {
             "supply-pump-1": "watchdog ok",
@@ -103,10 +102,6 @@ async def test_the_fleet_table_marks_every_watchdog_verdict_of_the_demo(browser:
         off = page.locator('tr[data-drive="conveyor-1"]').get_by_test_id("watchdog")
         assert "keeps running if the gateway dies" in (await off.get_attribute("title") or "")
         assert problems == []
-    finally:
-        service.stop()
-        async with asyncio.timeout(10):
-            await task
 
 
 UNPOWERED = """
@@ -135,21 +130,14 @@ async def test_a_drive_that_has_not_answered_says_so_and_shows_its_verdict_once_
     browser: Browser,
 ) -> None:
     port = free_port()
-    url = f"http://127.0.0.1:{port}"
     dark_s = 8  # the fan is unpowered for the first seconds
-    service = Service(parse_config(UNPOWERED.format(port=port, dark_s=dark_s)))
-    task = asyncio.create_task(service.run(install_signals=False), name="test.unpowered")
-    try:
-        await wait_until_listening(url, timeout_s=30)
-        page = await browser.new_page(viewport={"width": 1280, "height": 900})
-        problems: list[str] = []
-        page.on("pageerror", lambda error: problems.append(str(error)))
-        await page.goto(url + "/")
+    config = parse_config(UNPOWERED.format(port=port, dark_s=dark_s))
+    async with _dashboard(browser, config, port) as (page, problems):
         pump = page.locator('tr[data-drive="pump"]').get_by_test_id("watchdog")
         fan = page.locator('tr[data-drive="fan"]').get_by_test_id("watchdog")
         await expect(pump).to_have_text("watchdog ok", timeout=10000)
         await expect(fan).to_have_text("watchdog –")  # no verdict: not the same as one
-        await page.locator('tr[data-drive="fan"]').get_by_test_id("open").click()
+        await press(page, page.locator('tr[data-drive="fan"]').get_by_test_id("open"))
         view = page.get_by_test_id("dv-watchdog")
         await expect(view).to_have_text(
             "not judged yet: the drive has not answered since the gateway started"
@@ -159,7 +147,3 @@ async def test_a_drive_that_has_not_answered_says_so_and_shows_its_verdict_once_
         await page.go_back()
         await expect(fan).to_have_text("watchdog ok")
         assert problems == []
-    finally:
-        service.stop()
-        async with asyncio.timeout(10):
-            await task

@@ -21,9 +21,7 @@ import pytest
 from playwright.async_api import (
     Browser,
     ConsoleMessage,
-    Locator,
     Page,
-    async_playwright,
     expect,
 )
 
@@ -33,6 +31,7 @@ from fcmaster.config import load as load_config
 from fcmaster.protocol.codec import ParameterKey, ParameterValue
 from fcmaster.service import Service
 from fcmaster.subcommands.daemon import with_http_listen
+from tests.integration.browser_harness import chromium, chromium_marks, press
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import (
     OPERATOR_TOKEN,
@@ -42,26 +41,13 @@ from tests.integration.http_harness import (
 )
 from tests.integration.ports import free_port
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-    "--disable-component-update", "--disable-sync", "--no-first-run",
-]  # fmt: skip
-
-if not Path(CHROMIUM).exists():
-    if os.environ.get("CI") == "true":
-        raise RuntimeError(f"the dashboard tests need {CHROMIUM} (apt package chromium)")
-    pytestmark = pytest.mark.skip(reason=f"needs {CHROMIUM}")
+pytestmark = chromium_marks()
 
 
 @pytest.fixture
 async def browser() -> AsyncIterator[Browser]:
-    async with async_playwright() as playwright:
-        browser = await playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            yield browser
-        finally:
-            await browser.close()
+    async with chromium() as browser:
+        yield browser
 
 
 async def _open(
@@ -195,7 +181,6 @@ async def test_a_wrong_token_is_called_wrong_and_a_new_link_applies_without_relo
 
 DEMO = load_config(DEMO_CONFIG)
 BUS_DRIVES = [d.name for line in DEMO.lines for d in line.drives if d.control]
-HUMAN_PRESS_S = 0.150  # mouse down to mouse up, as a person clicks
 KEYSTROKE_S = 0.120
 
 
@@ -221,16 +206,6 @@ async def busy(gateway: FakeGateway, every_s: float = 0.02) -> AsyncIterator[Non
             await task
 
 
-async def _press(page: Page, target: Locator) -> None:
-    """A person's click: move there, press, hold 150 ms, release."""
-    box = await target.bounding_box()
-    assert box is not None
-    await page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
-    await page.mouse.down()
-    await asyncio.sleep(HUMAN_PRESS_S)
-    await page.mouse.up()
-
-
 async def test_a_held_click_on_stop_and_start_opens_the_confirmation_every_time(
     browser: Browser,
 ) -> None:
@@ -245,7 +220,7 @@ async def test_a_held_click_on_stop_and_start_opens_the_confirmation_every_time(
             for action, question in (("stop", f"Stop {name}?"), ("start", f"Start {name}?")):
                 button = row.locator(f'button[data-action="{action}"]')
                 await button.scroll_into_view_if_needed()
-                await _press(page, button)
+                await press(page, button)
                 await expect(dialog).to_be_visible(timeout=2000)
                 opened.append(await page.locator("#confirm-text").text_content() == question)
                 await dialog.get_by_role("button", name="Cancel").click()
@@ -265,7 +240,7 @@ async def test_typing_a_reference_keeps_the_text_and_the_focus_while_the_line_is
         await expect(page.get_by_test_id("connection")).to_have_text("live")
         for name in ("supply-pump-1", "conveyor-2"):
             field = page.locator(f'tr[data-drive="{name}"]').get_by_test_id("reference")
-            await _press(page, field)
+            await press(page, field)
             await field.press_sequentially("37.5", delay=KEYSTROKE_S * 1000)
             await expect(field).to_have_value("37.5")
             await expect(field).to_be_focused()

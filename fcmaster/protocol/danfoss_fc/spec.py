@@ -52,14 +52,7 @@ SPEC: Final[ProtocolSpec[FcOptions]] = ProtocolSpec(
     parities=("E", "O", "N"),  # 8-33
     # The response delay is each drive's own 8-35: the line's response_delay_ms says it.
     status_bits=StatusWord,
-    parameters=ParameterTables(
-        set_members=parameters.SET_MEMBERS,
-        identity=parameters.IDENTITY,
-        identity_match=parameters.IDENTITY_MATCH,
-        changeable_while_running=parameters.CHANGEABLE_WHILE_RUNNING,
-        link_settings=parameters.LINK_SETTINGS,
-        unit_of=lambda key: parameters.lookup(key.code).unit,
-    ),
+    parameters=ParameterTables.of(parameters, lambda key: parameters.lookup(key.code).unit),
     describe=describe_telegram,
     checksum_key="bcc_ok",
     ramp_parameters=("3-41", "3-42"),

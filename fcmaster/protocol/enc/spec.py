@@ -76,14 +76,7 @@ SPEC: Final[ProtocolSpec[EncOptions]] = ProtocolSpec(
     parities=("N", "E", "O"),  # F2.14
     address_hint=_address_hint,
     status_bits=StateWord,
-    parameters=ParameterTables(
-        set_members=parameters.SET_MEMBERS,
-        identity=parameters.IDENTITY,
-        identity_match=parameters.IDENTITY_MATCH,
-        changeable_while_running=parameters.CHANGEABLE_WHILE_RUNNING,
-        link_settings=parameters.LINK_SETTINGS,
-        unit_of=lambda key: parameters.lookup(key.code).unit,
-    ),
+    parameters=ParameterTables.of(parameters, lambda key: parameters.lookup(key.code).unit),
     describe=describe_frame,
     checksum_key="checksum_ok",
     parse_text=parse_ascii_frame,

@@ -88,14 +88,7 @@ SPEC: Final[ProtocolSpec[MitsubishiOptions]] = ProtocolSpec(
     parities=("E", "O", "N"),  # Pr.120
     fixed_response_delay_s=_response_delay_s,
     status_bits=StatusBits,
-    parameters=ParameterTables(
-        set_members=parameters.SET_MEMBERS,
-        identity=parameters.IDENTITY,
-        identity_match=parameters.IDENTITY_MATCH,
-        changeable_while_running=parameters.CHANGEABLE_WHILE_RUNNING,
-        link_settings=parameters.LINK_SETTINGS,
-        unit_of=lambda key: parameters.resolve(key).unit,
-    ),
+    parameters=ParameterTables.of(parameters, lambda key: parameters.resolve(key).unit),
     describe=describe_frame,
     checksum_key="sum_ok",
     parse_text=parse_ascii_frame,

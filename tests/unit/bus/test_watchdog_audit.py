@@ -260,19 +260,24 @@ async def test_configured_watchdog_already_in_the_drive_is_not_written_again() -
     assert reports == [("a", WatchdogReport(3.0, "stop and trip", Verdict.OK))]
 
 
-async def test_a_refused_write_leaves_the_verdict_to_what_the_drive_reads_back() -> None:
-    a = DrivePlan(name="a", address=1, control=True, watchdog=WatchdogPlan(3.0, "stop"))
-    fc = _drive(1, 600, 0)
+def _refusing_function_writes(fc: FcDrive) -> Responder:
+    """``fc``'s line, but a write of 8-04 is refused (error 17: not in this mode)."""
     line = FcLine(fc)
 
-    def refuse_function_writes(request: bytes) -> bytes | Timed | None:
+    def respond(request: bytes) -> bytes | Timed | None:
         telegram = decode_telegram(request, from_drive=False)
-        if telegram.pnu == FUNCTION and telegram.ak in WRITES:  # error 17: not in this mode
+        if telegram.pnu == FUNCTION and telegram.ak in WRITES:
             pke = make_pke(ResponseAk.ERROR, FUNCTION)
             return reply_frame(1, fc.status_word, pke=pke, pwe=17)
         return line(request)
 
-    b, reports, audit = _bench(a, fc=[fc], responder=refuse_function_writes)
+    return respond
+
+
+async def test_a_refused_write_leaves_the_verdict_to_what_the_drive_reads_back() -> None:
+    a = DrivePlan(name="a", address=1, control=True, watchdog=WatchdogPlan(3.0, "stop"))
+    fc = _drive(1, 600, 0)
+    b, reports, audit = _bench(a, fc=[fc], responder=_refusing_function_writes(fc))
     with structlog.testing.capture_logs() as logs:
         async with b.master:
             await b.clock.run_until(T0 + 3.0)
@@ -330,16 +335,7 @@ def test_replies_reach_the_inner_observer_without_a_call_of_the_audits_own() -> 
 async def test_a_refused_write_is_tried_again_once_per_stop_not_in_a_loop() -> None:
     a = DrivePlan(name="a", address=1, control=True, watchdog=WatchdogPlan(3.0, "stop"))
     fc = _drive(1, 600, 0)  # stopped all along
-    line = FcLine(fc)
-
-    def refuse_function_writes(request: bytes) -> bytes | Timed | None:
-        telegram = decode_telegram(request, from_drive=False)
-        if telegram.pnu == FUNCTION and telegram.ak in WRITES:  # error 17: not in this mode
-            pke = make_pke(ResponseAk.ERROR, FUNCTION)
-            return reply_frame(1, fc.status_word, pke=pke, pwe=17)
-        return line(request)
-
-    b, reports, audit = _bench(a, fc=[fc], responder=refuse_function_writes)
+    b, reports, audit = _bench(a, fc=[fc], responder=_refusing_function_writes(fc))
     with structlog.testing.capture_logs() as logs:
         async with b.master:
             await b.clock.run_until(T0 + 60.0)
