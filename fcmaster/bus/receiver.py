@@ -81,8 +81,8 @@ class Receiver(asyncio.Protocol):
         if piece is not None:
             self._hand(piece)
         elif self.gap_s and framer.buffered:
-            # An unfinished frame: look again one gap after its last byte. The timer is
-            # moved only when it fires (see _on_gap), not for every chunk.
+            # An unfinished frame: look again one gap after its last byte (_look_at_gap,
+            # written out here: this runs for every chunk).
             due = at + self.gap_s
             if self._gap_timer is None or self._gap_due > due:
                 if self._gap_timer is not None:
@@ -130,13 +130,15 @@ class Receiver(asyncio.Protocol):
             handler(None)
             return None
         self.framer, self.gap_s, self._handler = framer, gap_s, handler
-        if framer.buffered:  # a frame begun in an earlier read: the gap runs from its bytes
-            deadline = min(deadline, self.received_at + gap_s)
         self._deadline = deadline
         self._loop = asyncio.get_running_loop()
         # Set for this read and cancelled when it ends: a timer kept for the next read
         # would fire during it, a wake-up for nothing (a cancelled one never wakes the loop).
         self._set_deadline_timer(deadline)
+        if gap_s and framer.buffered:
+            # A frame begun in an earlier read: the gap runs from its last bytes, on the gap
+            # timer, which follows the chunks that arrive meanwhile (the deadline's would not).
+            self._look_at_gap(self.received_at + gap_s)
         return None
 
     def unwatch(self) -> None:
@@ -158,6 +160,17 @@ class Receiver(asyncio.Protocol):
             self._set_deadline_timer(self._deadline)
             return
         self._hand(None)
+
+    def _look_at_gap(self, due: float) -> None:
+        """An unfinished frame: look again at ``due``, one gap after its last byte.
+
+        The timer is moved only when it fires (see :meth:`_on_gap`), not for every chunk.
+        """
+        if self._gap_timer is None or self._gap_due > due:
+            if self._gap_timer is not None:
+                self._gap_timer.cancel()
+            self._gap_due = due
+            self._gap_timer = self._call_later(due, self._on_gap)
 
     def _on_gap(self) -> None:
         """The gap timer fired: hand over unless bytes came since it was set."""

@@ -129,6 +129,40 @@ async def test_a_frame_read_ends_at_a_gap_after_an_unfinished_frame(
         await transport.close()
 
 
+async def test_a_frame_begun_in_an_earlier_read_is_cut_one_gap_after_its_last_chunk(
+    pty_pair: tuple[int, str],
+) -> None:
+    # A read that starts with part of a frame in hand (the Link reads on after a piece
+    # that was not the reply) gives the frame a gap after its latest chunk, not after
+    # the chunks it had when the read began: a frame in three chunks is taken whole.
+    controller, path = pty_pair
+    transport = SerialTransport(path, baudrate=19200)
+    await transport.open()
+    clock = MonotonicClock()
+    framer = FcFramer()
+    gap = 0.5
+    try:
+        os.write(controller, FC_REPLY[:3])
+        await wait_for(lambda: transport.received_at > 0.0, timeout_s=5.0)
+        first_at = transport.received_at
+        await asyncio.sleep(0.2)  # nobody reads yet: the chunk waits in the buffer
+        reader = asyncio.create_task(transport.read_frame(framer, clock.now() + 5.0, gap))
+        await asyncio.sleep(0.1)
+        os.write(controller, FC_REPLY[3:5])
+        await wait_for(lambda: framer.buffered == 5, timeout_s=5.0)
+        middle_at = transport.received_at
+        # Past a gap after the first chunk, well inside one after the second.
+        await asyncio.sleep(max(0.0, first_at + gap + 0.1 - clock.now()))
+        assert clock.now() < middle_at + gap - 0.05
+        os.write(controller, FC_REPLY[5:])
+        async with asyncio.timeout(5):
+            piece = await reader
+        assert piece == Frame(FC_REPLY)
+        assert transport.received_at - middle_at < gap
+    finally:
+        await transport.close()
+
+
 async def test_a_read_with_nothing_arriving_times_out_at_its_deadline(
     pty_pair: tuple[int, str],
 ) -> None:
