@@ -4,7 +4,8 @@ import asyncio
 import contextlib
 import os
 import tty
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
+from typing import Any
 
 import pytest
 
@@ -29,14 +30,23 @@ def pty_pair() -> Iterator[tuple[int, str]]:
         os.close(device)
 
 
+@contextlib.asynccontextmanager
+async def opened(port: str, **settings: Any) -> AsyncIterator[SerialTransport]:
+    """A SerialTransport on ``port``, open for the block and closed after it."""
+    transport = SerialTransport(port, **settings)
+    await transport.open()
+    try:
+        yield transport
+    finally:
+        await transport.close()
+
+
 async def test_bytes_go_out_in_one_write_and_replies_come_back(
     pty_pair: tuple[int, str],
 ) -> None:
     controller, path = pty_pair
-    transport = SerialTransport(path, baudrate=19200, parity="E")
-    await transport.open()
     clock = MonotonicClock()
-    try:
+    async with opened(path, baudrate=19200, parity="E") as transport:
         await transport.write(b"\x02\x06\x81\x04\x7c\x20\x00\xdd")
         await asyncio.sleep(0.01)
         assert os.read(controller, 64) == b"\x02\x06\x81\x04\x7c\x20\x00\xdd"
@@ -46,8 +56,6 @@ async def test_bytes_go_out_in_one_write_and_replies_come_back(
             while len(got) < 8:
                 got += await transport.read(clock.now() + 1.0)
         assert got == b"\x02\x06\x81\x0f\x07\x20\x00\x2f"
-    finally:
-        await transport.close()
 
 
 async def test_bytes_are_stamped_when_they_arrive_not_when_they_are_read(
@@ -56,10 +64,8 @@ async def test_bytes_are_stamped_when_they_arrive_not_when_they_are_read(
     # The pause after a reply counts from its arrival: a reader that gets to the bytes late
     # (another callback ran first) must still learn when they came.
     controller, path = pty_pair
-    transport = SerialTransport(path, baudrate=19200)
-    await transport.open()
     clock = MonotonicClock()
-    try:
+    async with opened(path, baudrate=19200) as transport:
         sent_at = clock.now()
         os.write(controller, b"\x02\x06\x81")
         # The loop takes the bytes in; nobody reads them yet.
@@ -68,8 +74,6 @@ async def test_bytes_are_stamped_when_they_arrive_not_when_they_are_read(
         read_at = clock.now()
         assert await transport.read(read_at + 1.0) == b"\x02\x06\x81"
         assert sent_at <= transport.received_at < read_at
-    finally:
-        await transport.close()
 
 
 # A process-data reply from drive 1 (status 0x0F07, main actual value 0x2000), BCC 0xAD.
@@ -83,11 +87,9 @@ async def test_a_frame_read_is_fed_in_the_callback_and_wakes_once_when_whole(
     # framer as it arrives; the reader resumes once, with the whole frame, stamped with the
     # arrival of the chunk that completed it.
     controller, path = pty_pair
-    transport = SerialTransport(path, baudrate=19200)
-    await transport.open()
     clock = MonotonicClock()
     framer = FcFramer()
-    try:
+    async with opened(path, baudrate=19200) as transport:
         reader = asyncio.create_task(transport.read_frame(framer, clock.now() + 5.0, 1.0))
         await asyncio.sleep(0.01)
         os.write(controller, FC_REPLY[:3])
@@ -102,19 +104,15 @@ async def test_a_frame_read_is_fed_in_the_callback_and_wakes_once_when_whole(
         assert piece == Frame(FC_REPLY)
         assert transport.received_at >= last_sent_at
         assert framer.buffered == 0
-    finally:
-        await transport.close()
 
 
 async def test_a_frame_read_ends_at_a_gap_after_an_unfinished_frame(
     pty_pair: tuple[int, str],
 ) -> None:
     controller, path = pty_pair
-    transport = SerialTransport(path, baudrate=19200)
-    await transport.open()
     clock = MonotonicClock()
     framer = FcFramer()
-    try:
+    async with opened(path, baudrate=19200) as transport:
         deadline = clock.now() + 5.0
         os.write(controller, FC_REPLY[:4])
         async with asyncio.timeout(5):
@@ -125,8 +123,6 @@ async def test_a_frame_read_ends_at_a_gap_after_an_unfinished_frame(
         assert clock.now() >= transport.received_at + 0.05
         framer.reset()
         assert framer.next_frame() == Skipped(FC_REPLY[:1], SkipReason.GAP)
-    finally:
-        await transport.close()
 
 
 async def test_a_frame_begun_in_an_earlier_read_is_cut_one_gap_after_its_last_chunk(
@@ -136,12 +132,10 @@ async def test_a_frame_begun_in_an_earlier_read_is_cut_one_gap_after_its_last_ch
     # that was not the reply) gives the frame a gap after its latest chunk, not after
     # the chunks it had when the read began: a frame in three chunks is taken whole.
     controller, path = pty_pair
-    transport = SerialTransport(path, baudrate=19200)
-    await transport.open()
     clock = MonotonicClock()
     framer = FcFramer()
     gap = 0.5
-    try:
+    async with opened(path, baudrate=19200) as transport:
         os.write(controller, FC_REPLY[:3])
         await wait_for(lambda: transport.received_at > 0.0, timeout_s=5.0)
         first_at = transport.received_at
@@ -159,24 +153,18 @@ async def test_a_frame_begun_in_an_earlier_read_is_cut_one_gap_after_its_last_ch
             piece = await reader
         assert piece == Frame(FC_REPLY)
         assert transport.received_at - middle_at < gap
-    finally:
-        await transport.close()
 
 
 async def test_a_read_with_nothing_arriving_times_out_at_its_deadline(
     pty_pair: tuple[int, str],
 ) -> None:
     _, path = pty_pair
-    transport = SerialTransport(path, baudrate=19200)
-    await transport.open()
     clock = MonotonicClock()
-    try:
+    async with opened(path, baudrate=19200) as transport:
         deadline = clock.now() + 0.05
         with pytest.raises(ReplyTimeout):
             await transport.read(deadline)
         assert clock.now() >= deadline
-    finally:
-        await transport.close()
 
 
 class _ShiftedClock(MonotonicClock):
@@ -193,10 +181,8 @@ async def test_arrivals_and_deadlines_are_on_the_transports_clock_not_the_loops(
 ) -> None:
     controller, path = pty_pair
     clock = _ShiftedClock()
-    transport = SerialTransport(path, baudrate=19200, clock=clock)
-    await transport.open()
     framer = FcFramer()
-    try:
+    async with opened(path, baudrate=19200, clock=clock) as transport:
         # On the loop's timebase this deadline would be an hour away; on the clock's it is
         # 50 ms, and the read ends then.
         deadline = clock.now() + 0.05
@@ -211,21 +197,15 @@ async def test_arrivals_and_deadlines_are_on_the_transports_clock_not_the_loops(
             piece = await transport.read_frame(framer, clock.now() + 5.0, 1.0)
         assert piece == Frame(FC_REPLY)
         assert before <= transport.received_at <= clock.now()  # stamped on the clock
-    finally:
-        await transport.close()
 
 
 async def test_stale_input_is_discarded_and_returned(pty_pair: tuple[int, str]) -> None:
     controller, path = pty_pair
-    transport = SerialTransport(path, baudrate=19200)
-    await transport.open()
-    try:
+    async with opened(path, baudrate=19200) as transport:
         os.write(controller, b"late reply")
         await asyncio.sleep(0.05)
         assert transport.discard_input() == b"late reply"
         assert transport.discard_input() == b""
-    finally:
-        await transport.close()
 
 
 async def test_reopening_a_pty_with_parity_works_although_the_kernel_refuses_it(
@@ -271,11 +251,9 @@ async def test_a_write_larger_than_the_kernel_takes_at_once_arrives_whole_and_in
     pty_pair: tuple[int, str],
 ) -> None:
     controller, path = pty_pair
-    transport = SerialTransport(path, baudrate=115200, parity="N")
-    await transport.open()
     data = bytes(range(256)) * 1024  # far more than a pty buffers
     os.set_blocking(controller, False)
-    try:
+    async with opened(path, baudrate=115200, parity="N") as transport:
         await transport.write(data[: len(data) // 2])
         await transport.write(data[len(data) // 2 :])  # queued behind the unsent rest
         received = bytearray()
@@ -286,8 +264,6 @@ async def test_a_write_larger_than_the_kernel_takes_at_once_arrives_whole_and_in
                 except BlockingIOError:
                     await asyncio.sleep(0.001)
         assert received == data
-    finally:
-        await transport.close()
 
 
 async def test_a_socket_url_goes_through_the_same_transport() -> None:
