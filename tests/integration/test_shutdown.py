@@ -157,7 +157,9 @@ async def test_after_sigterm_only_stops_reach_the_wire_and_every_client_gets_an_
     # on the wire: after SIGTERM at most the telegram already on its way asked for a motion;
     # from the first stop on, nothing did, and every drive got its stop
     after = [(address, word) for at, address, word in wire.telegrams if at > signalled]
-    first_stop = next(i for i, (_, word) in enumerate(after) if not _runs(word))
+    stops = [i for i, (_, word) in enumerate(after) if not _runs(word)]
+    assert stops, (after[:8], len(wire.telegrams), daemon.tail(40))
+    first_stop = stops[0]
     assert first_stop <= 1, after[:4]
     assert [w for _, w in after[first_stop:] if _runs(w)] == []
     assert {address for address, _ in after[first_stop:]} >= set(ADDRESSES)
