@@ -441,7 +441,7 @@ def poll_requests(case: Case) -> list[bytes]:
     return [codec.read(a, key, 0, None)[0].request for a in range(1, case.drives + 1)]
 
 
-def _open_raw(case: Case, path: str) -> serial.Serial:
+def open_raw(case: Case, path: str) -> serial.Serial:
     """The pty, configured by pyserial (without parity: a pty carries none)."""
     return serial.Serial(path, baudrate=case.baudrate, timeout=0)
 
@@ -470,7 +470,7 @@ def run_raw_floor(case: Case, path: str, duration_s: float) -> dict[str, Any]:
     """
     lower_timer_slack()
     requests, pause = poll_requests(case), case.pause_s
-    port = _open_raw(case, path)
+    port = open_raw(case, path)
     fd = port.fileno()
 
     def cycle(until: float) -> int:
@@ -510,7 +510,7 @@ async def run_asyncio_floor(case: Case, path: str, duration_s: float) -> dict[st
     """
     requests, pause = poll_requests(case), case.pause_s
     loop, clock = asyncio.get_running_loop(), MonotonicClock()
-    port = _open_raw(case, path)
+    port = open_raw(case, path)
     fd = port.fileno()
     received = bytearray()
     waiter: list[asyncio.Future[None]] = []
