@@ -1197,6 +1197,72 @@ def test_a_peeked_poll_left_for_a_command_is_chosen_again_after_it() -> None:
     assert again.exchange.request == poll.exchange.request  # same drive, same rotation item
 
 
+def test_a_peeked_command_cancelled_at_shutdown_is_no_longer_next() -> None:
+    p = planner(A, B)
+    adopted(p)
+    p.submit("b", start(40.0), "start")
+    chosen = p.peek(0.0)  # chosen inside the pause after a reply
+    assert chosen is not None
+    assert chosen.pending is not None
+    (ended,) = p.cancel_queued("fcmaster is shutting down")
+    assert ended.tickets == ("start",)
+    assert not p.still_next(chosen)
+    with pytest.raises(ValueError, match="only the step just peeked"):
+        p.commit(chosen, 0.0)
+    assert not p.has_commands
+    assert take(p).kind is StepKind.POLL  # nothing of the start goes out
+
+
+def test_a_peeked_step_stays_next_when_nothing_came_in_or_ended() -> None:
+    p = planner(A, B)
+    adopted(p)
+    p.submit("a", Command(action=Action.READ, parameter="16-13"), "read")
+    p.submit("b", start(40.0), "start")
+    chosen = p.peek(0.0)
+    assert chosen is not None
+    assert chosen.pending is not None
+    assert chosen.pending.tickets == ["read"]
+    assert p.still_next(chosen)
+    p.submit("z", STOP, "no such drive")  # refused: the queue is as it was
+    assert p.still_next(chosen)
+
+
+def test_a_command_that_comes_in_after_a_peek_makes_it_stale() -> None:
+    p = planner(A, B)
+    adopted(p)
+    poll = p.peek(0.0)
+    assert poll is not None
+    assert poll.kind is StepKind.POLL
+    p.submit("b", start(40.0), "start")
+    assert not p.still_next(poll)
+    chosen = p.peek(0.0)
+    assert chosen is not None
+    assert chosen.kind is StepKind.COMMAND
+    p.submit("a", STOP, "stop")  # a stop goes before the start just chosen
+    assert not p.still_next(chosen)
+    first = take(p)
+    assert (first.slot.name if first.slot else None, telegram(first).pcd1) == ("a", STOP_WORD)
+
+
+def test_a_newer_reference_replacing_a_peeked_one_is_the_one_built() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=50.0)
+    p.submit("a", set_reference(20.0), "older")
+    older = p.peek(0.0)
+    assert older is not None
+    assert telegram(older).pcd2 == encode_reference(20.0)
+    ((replaced,),) = [p.submit("a", set_reference(30.0), "newer")]
+    assert replaced.tickets == ("older",)
+    assert replaced.result.outcome is Outcome.SUPERSEDED
+    step = take(p)
+    assert telegram(step).pcd2 == encode_reference(30.0)
+    report = p.on_reply(step, reply(1, running=True, output_pct=30.0), 0.0)
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("newer",), Outcome.DONE)
+    ]
+    assert telegram(take(p)).pcd2 == encode_reference(30.0)  # the polls carry it on
+
+
 def test_only_the_step_just_peeked_can_be_committed() -> None:
     p = planner(DrivePlan(name="a", address=1))
     p.submit("a", Command(action=Action.READ, parameter="16-14"), "t")
