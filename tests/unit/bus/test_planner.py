@@ -24,7 +24,7 @@ from hypothesis.stateful import (
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
-from fcmaster.bus.planner import Completion, Pending, Planner, Report, Step, StepKind
+from fcmaster.bus.planner import Completion, Pending, Phase, Planner, Report, Step, StepKind
 from fcmaster.protocol.codec import (
     Condition,
     ConditionReport,
@@ -882,6 +882,7 @@ class PlannerMachine(RuleBasedStateMachine):
         self.planner = Planner(plan, FcCodec())
         self.now = 0.0
         self.in_flight: Step | None = None
+        self.chosen: Step | None = None  # peeked as a reply came in, to go when the pause ends
         self.tickets: list[int] = []
         self.ends: dict[int, list[CommandResult]] = {}
         self.urgent: set[int] = set()  # urgent commands submitted and not ended
@@ -956,11 +957,32 @@ class PlannerMachine(RuleBasedStateMachine):
         command = Command(action=Action.SET_REFERENCE, reference_pct=reference_pct)
         self._submit(self._drive_in_flight(), command)
 
+    # The master chooses the next step as a reply comes in and sends it when the pause after
+    # that reply ends; commands may come in, and the queue be cancelled, in between.
+    @precondition(lambda self: self.in_flight is None and self.chosen is None)
+    @rule(elapsed=st.floats(0.0, 0.4))
+    def choose(self, elapsed: float) -> None:
+        self.now += elapsed
+        self.chosen = self.planner.peek(self.now)
+
+    @precondition(lambda self: len(self.tickets) % 8 == 3)  # now and then, as line_lost
+    @rule()
+    def shut_down(self) -> None:
+        self._ended(self.planner.cancel_queued("fcmaster is shutting down"))
+
     @precondition(lambda self: self.in_flight is None)
     @rule(elapsed=st.floats(0.0, 0.4))
     def send(self, elapsed: float) -> None:
-        self.now += elapsed
-        step = self.planner.next_step(self.now)
+        chosen, self.chosen = self.chosen, None
+        if chosen is not None and self.planner.still_next(chosen):
+            pending = chosen.pending
+            assert pending is None or pending.phase is not Phase.ENDED
+            assert pending is None or not any(t in self.ends for t in pending.tickets)
+            step: Step | None = chosen
+            self.planner.commit(chosen, self.now)
+        else:
+            self.now += elapsed
+            step = self.planner.next_step(self.now)
         waiting = {ticket for pending in self._confirming() for ticket in pending.tickets}
         if self.urgent - waiting:  # acknowledged stops wait for their status, not the line
             assert step is not None
@@ -1046,7 +1068,7 @@ class PlannerMachine(RuleBasedStateMachine):
     @precondition(lambda self: len(self.tickets) % 8 == 7)  # now and then: it empties the queues
     @rule()
     def line_lost(self) -> None:
-        self.in_flight = None  # the step in flight is abandoned with the port
+        self.in_flight = self.chosen = None  # the step in flight is abandoned with the port
         self._ended(self.planner.cancel_all("line1 lost its port"))
 
     @invariant()
