@@ -17,10 +17,10 @@ The pause is counted from the reply's arrival, so the work inside it is free; th
 sleep must be precise for this to hold (see :mod:`fcmaster.clock`). A command that arrives
 during the pause still goes first: the step chosen before it is chosen again, and a command
 chosen before the pause that ended meanwhile (cancelled at shutdown, superseded by a stop)
-is never sent. On a serial
-port with the real clock, runs of polls and probes are carried in callbacks instead of by
-this loop (:mod:`~fcmaster.bus.steady`), with the same steps and the same rules; what the
-line tells the layers above goes through :mod:`~fcmaster.bus.reporting`.
+is never sent. On a serial port with the real clock, runs of polls and probes are carried
+in callbacks instead of by this loop (:mod:`~fcmaster.bus.steady`), with the same steps and
+the same rules; what the line tells the layers above goes through
+:mod:`~fcmaster.bus.reporting`.
 
 A port that fails (adapter unplugged, server gone) takes the line down: queued commands end
 ``cancelled`` with the reason, and the port is reopened with jittered exponential backoff

@@ -23,8 +23,8 @@ Choosing and doing are apart: :meth:`Planner.peek` chooses the next step and cha
 nothing; :meth:`Planner.commit` makes it happen when it goes on the wire. A step chosen
 inside the pause is sent only if it is :meth:`Planner.still_next` when the pause ends: a
 command that came in meanwhile may go first or supersede it, and a command cancelled at
-shutdown meanwhile must not go out at all. A command's
-lifecycle is its :class:`~fcmaster.bus.steps.Phase`.
+shutdown meanwhile must not go out at all. A command's lifecycle is its
+:class:`~fcmaster.bus.steps.Phase`.
 
 Control state. A ``control: bus`` drive carries its commanded :class:`ControlIntent` in
 every exchange, which keeps the drive's control-word watchdog fed. Before the master knows
