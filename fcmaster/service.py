@@ -12,7 +12,8 @@ Shutdown (SIGTERM, SIGINT, or :meth:`Service.stop`) is orderly. From that moment
 surface's new command ends ``cancelled`` ("fcmaster is shutting down") in :meth:`execute`,
 and every queued command that is not a stop and not on the wire ends so too: the lines send
 nothing but what ``on_shutdown`` asks for. With ``stop`` every ``control: bus`` drive is sent
-a stop, which jumps every queue, and the service waits (bounded) for the results; with
+a stop, which jumps every queue, and the service waits (bounded) for the results, and
+names in an error each drive whose stop did not reach it (the line down, no answer); with
 ``hold`` the drives are left as they are and their own control-word timeout acts. Then the
 service waits (bounded) until every command still running has its outcome, so that each
 client gets its answer before the adapters close; then the lines close.
@@ -278,20 +279,57 @@ class Service:
         return adapter
 
     async def _stop_drives(self) -> None:
-        """Send a stop to every bus-controlled drive and wait, bounded, for the results."""
-        orders = [
-            master.execute(drive.name, Command(action=Action.STOP, actor=SHUTDOWN_ACTOR))
+        """Send a stop to every bus-controlled drive and wait, bounded, for the results.
+
+        A stop that ended without reaching its drive (the line down, no answer, a refusal)
+        leaves a motor that may be turning: ``service.shutdown_stop_failed``, an error, per
+        drive. One the drive took but whose status did not show it stopping in time
+        (``unconfirmed``, or still being confirmed at the bound) is a warning.
+        """
+        orders = {
+            (master.plan.name, drive.name): asyncio.ensure_future(
+                master.execute(drive.name, Command(action=Action.STOP, actor=SHUTDOWN_ACTOR))
+            )
             for master in self.masters.values()
             for drive in master.plan.drives
             if drive.control
-        ]
+        }
         if not orders:
             return
+        # Bounded on the service's clock (virtual in tests), as the lines' own waits are.
+        bound: asyncio.Future[None] = asyncio.ensure_future(
+            self.clock.sleep(SHUTDOWN_STOP_TIMEOUT_S)
+        )
+        waiting: set[asyncio.Future[Any]] = set(orders.values())
         try:
-            async with asyncio.timeout(SHUTDOWN_STOP_TIMEOUT_S):
-                await asyncio.gather(*orders)
-        except TimeoutError:
-            log.warning("service.shutdown_stop_timed_out")
+            while waiting and not bound.done():
+                _, waiting = await asyncio.wait(
+                    {*waiting, bound}, return_when=asyncio.FIRST_COMPLETED
+                )
+                waiting.discard(bound)
+        finally:
+            bound.cancel()
+            for order in orders.values():
+                order.cancel()  # a no-op for those that have their result
+        if waiting:
+            late = [f"{bus}/{drive}" for (bus, drive), order in orders.items() if order in waiting]
+            log.warning("service.shutdown_stop_timed_out", drives=late)
+        for (bus, drive), order in orders.items():
+            if order in waiting:
+                continue
+            result = order.result()
+            if result.outcome is Outcome.UNCONFIRMED:
+                log.warning(
+                    "service.shutdown_stop_unconfirmed", bus=bus, drive=drive, reason=result.reason
+                )
+            elif result.outcome is not Outcome.DONE:
+                log.error(
+                    "service.shutdown_stop_failed",
+                    bus=bus,
+                    drive=drive,
+                    outcome=result.outcome.value,
+                    reason=result.reason,
+                )
 
     async def _commands_ended(self) -> None:
         """Wait (bounded) until every command taken before the shutdown has its outcome."""

@@ -15,10 +15,12 @@ it is on the wire. Command results are resolved at once.
 
 The pause is counted from the reply's arrival, so the work inside it is free; the clock's
 sleep must be precise for this to hold (see :mod:`fcmaster.clock`). A command that arrives
-during the pause still goes first: the poll chosen before it is taken back. On a serial
-port with the real clock, runs of polls and probes are carried in callbacks instead of by
-this loop (:mod:`~fcmaster.bus.steady`), with the same steps and the same rules; what the
-line tells the layers above goes through :mod:`~fcmaster.bus.reporting`.
+during the pause still goes first: the step chosen before it is chosen again, and a command
+chosen before the pause that ended meanwhile (cancelled at shutdown, superseded by a stop)
+is never sent. On a serial port with the real clock, runs of polls and probes are carried
+in callbacks instead of by this loop (:mod:`~fcmaster.bus.steady`), with the same steps and
+the same rules; what the line tells the layers above goes through
+:mod:`~fcmaster.bus.reporting`.
 
 A port that fails (adapter unplugged, server gone) takes the line down: queued commands end
 ``cancelled`` with the reason, and the port is reopened with jittered exponential backoff
@@ -313,8 +315,10 @@ class BusMaster:
             if link.ready_at > now:
                 # The next step was chosen (and encoded) inside the pause, where it is free.
                 await clock.sleep_until(link.ready_at)
-                if step.kind is not StepKind.COMMAND and planner.has_commands:
-                    continue  # a command came in meanwhile: it goes first
+                if not planner.still_next(step):
+                    # A command came in meanwhile (it may go first, or supersede or replace
+                    # this one), or this one ended (cancelled at shutdown): choose again.
+                    continue
             planner.commit(step, clock.now())
             exchange = step.exchange
             await link.send(exchange)

@@ -20,8 +20,11 @@ so a dead drive costs one timeout per round until it is demoted, then one probe 
 turn, within the probes' share of the line.
 
 Choosing and doing are apart: :meth:`Planner.peek` chooses the next step and changes
-nothing; :meth:`Planner.commit` makes it happen when it goes on the wire. A command's
-lifecycle is its :class:`~fcmaster.bus.steps.Phase`.
+nothing; :meth:`Planner.commit` makes it happen when it goes on the wire. A step chosen
+inside the pause is sent only if it is :meth:`Planner.still_next` when the pause ends: a
+command that came in meanwhile may go first or supersede it, and a command cancelled at
+shutdown meanwhile must not go out at all. A command's lifecycle is its
+:class:`~fcmaster.bus.steps.Phase`.
 
 Control state. A ``control: bus`` drive carries its commanded :class:`ControlIntent` in
 every exchange, which keeps the drive's control-word watchdog fed. Before the master knows
@@ -171,6 +174,9 @@ class Planner:
         refusal = admission.refusal(self.codec, self.plan.name, self.slots, name, slot, command)
         if refusal is not None:
             return [Completion((ticket,), command, name or "*", refusal)]
+        # It may go before the step just peeked, or end or change the command that step
+        # carries (a stop supersedes it, a newer reference takes its place): choose again.
+        self._peeked = None
         return self._queue.add(Pending(command, slot, [ticket]), self._in_flight)
 
     def cancel_all(self, reason: str) -> list[Completion]:
@@ -187,7 +193,11 @@ class Planner:
         At shutdown nothing new may go out: the stops (urgent, always safe) stay, and so
         does the command whose exchange is on the wire, which ends with what the drive says.
         """
-        return self._queue.cancel_unsent(reason, self._in_flight)
+        ended = self._queue.cancel_unsent(reason, self._in_flight)
+        chosen = None if self._peeked is None else self._peeked.pending
+        if chosen is not None and chosen.phase is Phase.ENDED:
+            self._peeked = None  # chosen inside the pause, not sent: it must not go out now
+        return ended
 
     def on_line_down(self) -> None:
         """The port was lost or shut: adopt each drive again when it is next heard from.
@@ -246,6 +256,15 @@ class Planner:
                 step = Step(StepKind.PROBE, probe, slot)
         self._peeked = step
         return step
+
+    def still_next(self, step: Step) -> bool:
+        """Whether ``step``, just peeked, is still the one to send.
+
+        Not when a command came in since (it may go first, or supersede or replace the
+        command of ``step``) or the command of ``step`` ended (cancelled at shutdown): then
+        peek again. A step that is not still next must never be committed.
+        """
+        return step is self._peeked
 
     def commit(self, step: Step, now: float) -> None:
         """``step``, the one :meth:`peek` just chose, goes on the wire now."""

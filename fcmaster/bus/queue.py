@@ -135,6 +135,7 @@ class CommandQueue:
                 replaced = completion_of(queued, result)
                 queued.command = pending.command
                 queued.tickets = pending.tickets
+                queued.intent = None  # made from the older reference if it was peeked
                 return replaced
             return None
         return None

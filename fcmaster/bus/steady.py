@@ -108,8 +108,12 @@ class SteadyPolling:
         if step is None or ended is None or ended.done():
             return
         planner, link = self._planner, self._link
-        if planner.has_commands:
-            self._end(None)  # it goes first: the loop peeks again
+        if not planner.still_next(step):
+            # A command came in: it goes first, and the loop peeks again. Not merely "commands
+            # are queued": one waiting for a restarting drive leaves the others' polls to go,
+            # and ending here would hand the line to the loop, which peeks this poll again
+            # and comes straight back without a turn of the event loop, until that drive hears.
+            self._end(None)
             return
         try:
             planner.commit(step, self._clock.now())

@@ -155,3 +155,26 @@ async def test_reset_restarts_the_drive_and_the_master_waits_for_it() -> None:
         await asyncio.sleep(2.0)  # polls go on: Pr.122 = 1 s never runs out
         assert drive.control.fault is None
         assert master.stats.timeouts == timeouts
+
+
+async def test_a_command_waiting_for_a_restarting_drive_leaves_the_others_polled() -> None:
+    # While d1 restarts, a command for it waits; the other stations are polled meanwhile,
+    # in callbacks. Those polls must not be given up to the master's loop for the waiting
+    # command (the loop would choose the same poll again and hand it straight back, round
+    # and round without a turn of the event loop: nothing on the wire until d1 hears).
+    async with line_with_master(FaultPlan(), parameters={"Pr.122": 1.0}) as (_, master):
+        d1 = orders(master, "d1")
+        await wait_for(lambda: all(s.online for s in master.planner.slots))
+        assert (await d1.reset()).outcome is Outcome.DONE
+        deaf_from = asyncio.get_running_loop().time()
+        read = await d1.read("H6F")  # waits for d1 to hear again
+        assert read.outcome is Outcome.DONE, read.reason
+        window = (deaf_from + 0.1, deaf_from + RESTART_S - 0.1)
+        stations = [
+            int(data[1:3], 16)
+            for _, direction, at, _, data in master.frames.since(0).frames
+            if direction == "tx" and window[0] <= at <= window[1]
+        ]
+        assert len(stations) >= 10, stations  # tens of polls fit in 0.8 s at 38400
+        assert 1 not in stations
+        assert set(stations) == {0, 10, 31}

@@ -66,6 +66,37 @@ class Wire:
                 self.telegrams.append((time.monotonic(), telegram.address, telegram.pcd1))
 
 
+def _story(wire: Wire, signalled: float, events: list[dict[str, Any]]) -> str:
+    """What the wire and the daemon did from SIGTERM on, for a failure message in full.
+
+    Every telegram heard after the signal (ms after it, address, control word) and every
+    event the daemon logged from its ``service.stopping`` on, but the clients' commands
+    ended "shutting down" (only counted) and the lines' frame dumps.
+    """
+    heard = [
+        f"  +{(at - signalled) * 1000:7.1f} ms  drive {address}  word {word:#06x}"
+        f"{'  (run)' if _runs(word) else ''}"
+        for at, address, word in wire.telegrams
+        if at > signalled
+    ]
+    stopping = next((i for i, e in enumerate(events) if e["event"] == "service.stopping"), 0)
+    told, cancelled = [], 0
+    for event in events[stopping:]:
+        if event.get("reason") == "fcmaster is shutting down":
+            cancelled += 1
+            continue
+        shown = {k: v for k, v in event.items() if k not in ("recent_frames", "port", "bus")}
+        told.append(f"  {shown}")
+    return "\n".join(
+        [
+            f"{len(wire.telegrams)} telegrams heard, {len(heard)} after SIGTERM:",
+            *heard,
+            f"the daemon from service.stopping on ({cancelled} 'shutting down' left out):",
+            *told,
+        ]
+    )
+
+
 def _runs(word: int) -> bool:
     """Whether a control word asks the motor to run (valid data, start, no stop of any kind)."""
     needed = ControlWord.DATA_VALID | ControlWord.START | ControlWord.NO_COAST
@@ -158,12 +189,13 @@ async def test_after_sigterm_only_stops_reach_the_wire_and_every_client_gets_an_
     # from the first stop on, nothing did, and every drive got its stop
     after = [(address, word) for at, address, word in wire.telegrams if at > signalled]
     stops = [i for i, (_, word) in enumerate(after) if not _runs(word)]
-    assert stops, (after[:8], len(wire.telegrams), daemon.tail(40))
-    first_stop = stops[0]
-    assert first_stop <= 1, after[:4]
-    assert [w for _, w in after[first_stop:] if _runs(w)] == []
-    assert {address for address, _ in after[first_stop:]} >= set(ADDRESSES)
     events = daemon.log_events()
+    story = _story(wire, signalled, events)
+    assert stops, story
+    first_stop = stops[0]
+    assert first_stop <= 1, story
+    assert [w for _, w in after[first_stop:] if _runs(w)] == [], story
+    assert {address for address, _ in after[first_stop:]} >= set(ADDRESSES), story
     # A request is dropped unanswered only when it was still in the kernel's queue of
     # connections the server had not taken yet as it stopped listening (reset); one the
     # server had taken is always answered.
@@ -171,4 +203,6 @@ async def test_after_sigterm_only_stops_reach_the_wire_and_every_client_gets_an_
     closing_at = datetime.fromisoformat(closing["timestamp"].replace("Z", "+00:00")).timestamp()
     assert [d for d in dropped if d[0] < closing_at - 0.5] == []
     assert len(dropped) <= 8
-    assert not [e for e in events if e.get("level") in ("error", "critical") or "exception" in e]
+    assert not [e for e in events if e.get("level") in ("error", "critical") or "exception" in e], (
+        story
+    )

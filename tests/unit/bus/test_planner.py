@@ -24,7 +24,7 @@ from hypothesis.stateful import (
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
-from fcmaster.bus.planner import Completion, Pending, Planner, Report, Step, StepKind
+from fcmaster.bus.planner import Completion, Pending, Phase, Planner, Report, Step, StepKind
 from fcmaster.protocol.codec import (
     Condition,
     ConditionReport,
@@ -882,6 +882,7 @@ class PlannerMachine(RuleBasedStateMachine):
         self.planner = Planner(plan, FcCodec())
         self.now = 0.0
         self.in_flight: Step | None = None
+        self.chosen: Step | None = None  # peeked as a reply came in, to go when the pause ends
         self.tickets: list[int] = []
         self.ends: dict[int, list[CommandResult]] = {}
         self.urgent: set[int] = set()  # urgent commands submitted and not ended
@@ -956,11 +957,32 @@ class PlannerMachine(RuleBasedStateMachine):
         command = Command(action=Action.SET_REFERENCE, reference_pct=reference_pct)
         self._submit(self._drive_in_flight(), command)
 
+    # The master chooses the next step as a reply comes in and sends it when the pause after
+    # that reply ends; commands may come in, and the queue be cancelled, in between.
+    @precondition(lambda self: self.in_flight is None and self.chosen is None)
+    @rule(elapsed=st.floats(0.0, 0.4))
+    def choose(self, elapsed: float) -> None:
+        self.now += elapsed
+        self.chosen = self.planner.peek(self.now)
+
+    @precondition(lambda self: len(self.tickets) % 8 == 3)  # now and then, as line_lost
+    @rule()
+    def shut_down(self) -> None:
+        self._ended(self.planner.cancel_queued("fcmaster is shutting down"))
+
     @precondition(lambda self: self.in_flight is None)
     @rule(elapsed=st.floats(0.0, 0.4))
     def send(self, elapsed: float) -> None:
-        self.now += elapsed
-        step = self.planner.next_step(self.now)
+        chosen, self.chosen = self.chosen, None
+        if chosen is not None and self.planner.still_next(chosen):
+            pending = chosen.pending
+            assert pending is None or pending.phase is not Phase.ENDED
+            assert pending is None or not any(t in self.ends for t in pending.tickets)
+            step: Step | None = chosen
+            self.planner.commit(chosen, self.now)
+        else:
+            self.now += elapsed
+            step = self.planner.next_step(self.now)
         waiting = {ticket for pending in self._confirming() for ticket in pending.tickets}
         if self.urgent - waiting:  # acknowledged stops wait for their status, not the line
             assert step is not None
@@ -1046,7 +1068,7 @@ class PlannerMachine(RuleBasedStateMachine):
     @precondition(lambda self: len(self.tickets) % 8 == 7)  # now and then: it empties the queues
     @rule()
     def line_lost(self) -> None:
-        self.in_flight = None  # the step in flight is abandoned with the port
+        self.in_flight = self.chosen = None  # the step in flight is abandoned with the port
         self._ended(self.planner.cancel_all("line1 lost its port"))
 
     @invariant()
@@ -1195,6 +1217,72 @@ def test_a_peeked_poll_left_for_a_command_is_chosen_again_after_it() -> None:
     again = take(p)
     assert again.kind is StepKind.POLL
     assert again.exchange.request == poll.exchange.request  # same drive, same rotation item
+
+
+def test_a_peeked_command_cancelled_at_shutdown_is_no_longer_next() -> None:
+    p = planner(A, B)
+    adopted(p)
+    p.submit("b", start(40.0), "start")
+    chosen = p.peek(0.0)  # chosen inside the pause after a reply
+    assert chosen is not None
+    assert chosen.pending is not None
+    (ended,) = p.cancel_queued("fcmaster is shutting down")
+    assert ended.tickets == ("start",)
+    assert not p.still_next(chosen)
+    with pytest.raises(ValueError, match="only the step just peeked"):
+        p.commit(chosen, 0.0)
+    assert not p.has_commands
+    assert take(p).kind is StepKind.POLL  # nothing of the start goes out
+
+
+def test_a_peeked_step_stays_next_when_nothing_came_in_or_ended() -> None:
+    p = planner(A, B)
+    adopted(p)
+    p.submit("a", Command(action=Action.READ, parameter="16-13"), "read")
+    p.submit("b", start(40.0), "start")
+    chosen = p.peek(0.0)
+    assert chosen is not None
+    assert chosen.pending is not None
+    assert chosen.pending.tickets == ["read"]
+    assert p.still_next(chosen)
+    p.submit("z", STOP, "no such drive")  # refused: the queue is as it was
+    assert p.still_next(chosen)
+
+
+def test_a_command_that_comes_in_after_a_peek_makes_it_stale() -> None:
+    p = planner(A, B)
+    adopted(p)
+    poll = p.peek(0.0)
+    assert poll is not None
+    assert poll.kind is StepKind.POLL
+    p.submit("b", start(40.0), "start")
+    assert not p.still_next(poll)
+    chosen = p.peek(0.0)
+    assert chosen is not None
+    assert chosen.kind is StepKind.COMMAND
+    p.submit("a", STOP, "stop")  # a stop goes before the start just chosen
+    assert not p.still_next(chosen)
+    first = take(p)
+    assert (first.slot.name if first.slot else None, telegram(first).pcd1) == ("a", STOP_WORD)
+
+
+def test_a_newer_reference_replacing_a_peeked_one_is_the_one_built() -> None:
+    p = planner(A)
+    adopted(p, running=True, output_pct=50.0)
+    p.submit("a", set_reference(20.0), "older")
+    older = p.peek(0.0)
+    assert older is not None
+    assert telegram(older).pcd2 == encode_reference(20.0)
+    ((replaced,),) = [p.submit("a", set_reference(30.0), "newer")]
+    assert replaced.tickets == ("older",)
+    assert replaced.result.outcome is Outcome.SUPERSEDED
+    step = take(p)
+    assert telegram(step).pcd2 == encode_reference(30.0)
+    report = p.on_reply(step, reply(1, running=True, output_pct=30.0), 0.0)
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("newer",), Outcome.DONE)
+    ]
+    assert telegram(take(p)).pcd2 == encode_reference(30.0)  # the polls carry it on
 
 
 def test_only_the_step_just_peeked_can_be_committed() -> None:
