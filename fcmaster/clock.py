@@ -108,6 +108,20 @@ class MonotonicClock:
         while time.monotonic() < deadline:
             pass  # the last stretch, shorter than a wake-up's usual lateness
 
+    def wait_briefly(self, deadline: float) -> bool:
+        """Spin until ``deadline`` if it is nearer than a wake-up would come; whether it did.
+
+        A wait shorter than the clock's expected lateness would be spun anyway after a turn
+        of the loop (see :meth:`call_at`); a callback chain can spin it right here instead,
+        with no turn of the loop and no timer. False (at once, having waited nothing): the
+        wait is longer, and the caller schedules the call with :meth:`call_at`.
+        """
+        if deadline - time.monotonic() > self._early:
+            return False
+        while time.monotonic() < deadline:
+            pass  # shorter than a wake-up's usual lateness
+        return True
+
     def call_at(self, deadline: float, callback: Callable[[], None]) -> Timer:
         """Call ``callback`` on the running loop at ``deadline``, never before it.
 

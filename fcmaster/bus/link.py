@@ -401,6 +401,8 @@ class Link:
     def _discard_rest(self) -> None:
         """Bytes after the reply are late or noise: counted, never taken for a reply."""
         framer = self._framer
+        if not framer.buffered:  # mostly: the reply came alone
+            return
         framer.reset()
         while (piece := framer.next_frame()) is not None:
             self.stats.late_bytes += len(piece.data)

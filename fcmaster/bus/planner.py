@@ -241,7 +241,7 @@ class Planner:
         Nothing changes until :meth:`commit`: the master peeks inside the pause after a
         reply, and when a command comes in meanwhile it peeks again instead.
         """
-        pending = self._next_command(now)
+        pending = self._next_command(now) if self._queue else None
         if pending is not None:
             step = self._command_step(pending)
         else:

@@ -48,6 +48,9 @@ class CallingClock(Protocol):
     def call_at(self, deadline: float, callback: Callable[[], None]) -> Cancellable:
         """Call ``callback`` on the running loop at ``deadline``."""
 
+    def wait_briefly(self, deadline: float) -> bool:
+        """Spin until ``deadline`` if it is nearer than a wake-up would come; whether it did."""
+
 
 class SteadyPolling:
     """Carries polls and probes in callbacks until a step of another kind is due."""
@@ -94,9 +97,13 @@ class SteadyPolling:
             self._link.unwatch()
 
     def _due(self) -> None:
-        """The peeked step may go now, or at the end of the pause."""
+        """The peeked step may go now, or at the end of the pause.
+
+        What is left of a pause shorter than a wake-up's lateness is spun here (no turn of
+        the loop for it); a longer one ends in a timer.
+        """
         ready_at = self._link.ready_at
-        if ready_at > self._clock.now():
+        if ready_at > self._clock.now() and not self._clock.wait_briefly(ready_at):
             self._timer = self._clock.call_at(ready_at, self._go)
         else:
             self._go()
@@ -141,7 +148,8 @@ class SteadyPolling:
         except Exception as exc:  # the loop's supervision decides
             self._end(exc)
             return
-        if nxt is None or not self.carries(nxt):
+        # carries(nxt), written out: this runs for every reply
+        if nxt is None or nxt.kind is StepKind.COMMAND or not nxt.exchange.reply_length:
             self._end(None)
             return
         self._step = nxt

@@ -142,3 +142,16 @@ async def test_a_call_due_already_is_made_on_the_next_turn_of_the_loop() -> None
     assert calls == []  # never from inside call_at
     await asyncio.sleep(0)
     assert calls == ["due"]
+
+
+def test_a_brief_wait_is_spun_to_its_deadline_and_a_longer_one_left_to_a_timer() -> None:
+    clock = MonotonicClock()
+    clock._early = 0.0005  # as if wake-ups came half a millisecond late
+    for _ in range(20):
+        deadline = clock.now() + 0.0002
+        assert clock.wait_briefly(deadline)
+        assert clock.now() >= deadline
+    started = clock.now()
+    assert not clock.wait_briefly(started + 0.01)
+    assert clock.now() - started < 0.005  # it waited nothing
+    assert clock.wait_briefly(started - 1.0)  # passed already: nothing to wait
