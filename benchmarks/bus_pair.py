@@ -24,7 +24,12 @@ each reply's last byte was due). Against it, in turn, round after round:
   poll when the pause is over, on the precise loop. No framing, no checks, no state, no
   futures, no tasks: its CPU is the two wake-ups of a transaction (the reply, the end of
   the pause) and little else, and its ratio to ``generic`` is as low as fcmaster's could
-  go without waking less often.
+  go without waking less often;
+* **framed**: the floor plus the least a careful master does with each reply, for scale:
+  the FC framer and its checksum, the reply parsed by the codec (or found unchanged in a
+  cache, as fcmaster does), both frames logged in a ring, and a deadline timer set and
+  cancelled for each request. No planner, no accounting, no reporting: what fcmaster costs
+  beyond it is the price of its layers.
 
 Figures, each over the run's window after a 0.5 s warm-up, all but CPU measured by the
 peer (the simulator), the same way for every master:
@@ -50,7 +55,9 @@ import asyncio
 import itertools
 import os
 import sys
+import termios
 import time
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Final
@@ -63,7 +70,11 @@ from fcmaster import logsetup
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock, new_event_loop
+from fcmaster.errors import UnexpectedReply
+from fcmaster.protocol.codec import Reply
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
+from fcmaster.protocol.danfoss_fc.framer import FcFramer
+from fcmaster.protocol.framing import Frame
 
 DELAY_S: Final = 0.005
 TIMEOUT_S: Final = 0.1  # the generic master's reply timeout
@@ -138,6 +149,7 @@ async def run_floor(case: harness.Case, path: str, duration_s: float) -> dict[st
             counts["replies"] += 1
             loop.call_later(pause, send)
 
+    termios.tcflush(fd, termios.TCIFLUSH)  # what the master before this one left unread
     loop.add_reader(fd, readable)
     try:
         send()
@@ -153,11 +165,76 @@ async def run_floor(case: harness.Case, path: str, duration_s: float) -> dict[st
     return {"start": start, "end": end, "replies": replies, "timeouts": 0, "cpu_s": cpu}
 
 
+async def run_framed(case: harness.Case, path: str, duration_s: float) -> dict[str, Any]:
+    """The floor, plus framing, checks, parsing through a cache, a frame log and a deadline."""
+    loop = asyncio.get_running_loop()
+    port = harness.open_raw(case, path)
+    fd, pause = port.fileno(), case.pause_s
+    codec, framer = FcCodec(), FcFramer()
+    key = codec.parameter("16-13")
+    exchanges = itertools.cycle([codec.read(a, key, 0, None)[0] for a in range(1, case.drives + 1)])
+    frames: deque[tuple[str, float, float, bytes]] = deque(maxlen=4096)
+    parsed: dict[bytes, tuple[bytes, Reply]] = {}
+    counts = {"replies": 0, "timeouts": 0}
+    exchange = next(exchanges)
+    deadline: asyncio.TimerHandle | None = None
+
+    def send() -> None:
+        nonlocal exchange, deadline
+        exchange = next(exchanges)
+        os.write(fd, exchange.request)
+        frames.append(("tx", now(), time.time(), exchange.request))
+        deadline = loop.call_later(TIMEOUT_S, timed_out)
+
+    def timed_out() -> None:
+        counts["timeouts"] += 1
+        framer.reset()
+        send()
+
+    def readable() -> None:
+        at = now()
+        framer.feed(os.read(fd, 256))
+        piece = framer.next_frame()
+        while piece is not None and not isinstance(piece, Frame):
+            piece = framer.next_frame()  # skipped bytes: what an earlier master left unread
+        if piece is None:
+            return  # more to come
+        frames.append(("rx", at, time.time(), piece.data))
+        last = parsed.get(exchange.request)
+        if last is None or last[0] != piece.data:
+            try:
+                parsed[exchange.request] = (piece.data, codec.parse(exchange, piece.data))
+            except UnexpectedReply:
+                return  # a late answer to an earlier request: wait on for this one's
+        if deadline is not None:
+            deadline.cancel()
+        counts["replies"] += 1
+        loop.call_later(at + pause - now(), send)
+
+    termios.tcflush(fd, termios.TCIFLUSH)  # what the master before this one left unread
+    loop.add_reader(fd, readable)
+    try:
+        send()
+        await asyncio.sleep(harness.WARMUP_S)
+        counts.update(replies=0, timeouts=0)
+        cpu, start = time.process_time(), now()
+        await asyncio.sleep(duration_s)
+        end, cpu = now(), time.process_time() - cpu
+        result = dict(counts)
+    finally:
+        loop.remove_reader(fd)
+        if deadline is not None:
+            deadline.cancel()
+        port.close()
+    return {"start": start, "end": end, **result, "cpu_s": cpu}
+
+
 MASTERS: Final[dict[str, tuple[Callable[..., Any], Callable[[], asyncio.AbstractEventLoop]]]] = {
     "fcmaster": (run_fcmaster, new_event_loop),
     "generic": (run_generic, new_event_loop),
     "generic-epoll": (run_generic, harness.LOOPS["epoll"]),
     "floor": (run_floor, new_event_loop),
+    "framed": (run_framed, new_event_loop),
 }
 
 
@@ -237,7 +314,7 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "short_gaps": sum(r["short_gaps"] for r in mine),
                 "gaps": sum(r["gaps"] for r in mine),
             }
-        fc, generic, floor = medians["fcmaster"], medians["generic"], medians["floor"]
+        fc, generic = medians["fcmaster"], medians["generic"]
         out.append(
             {
                 "drives": drives,
@@ -247,9 +324,12 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                     key: fc[key] / generic[key] if generic[key] else None
                     for key in ("cpu_s_per_1000", "overhead_median_ms", "overhead_p99_ms")
                 },
-                "floor_over_generic": {
-                    key: floor[key] / generic[key] if generic[key] else None
-                    for key in ("cpu_s_per_1000", "overhead_median_ms", "overhead_p99_ms")
+                **{
+                    f"{name}_over_generic": {
+                        key: medians[name][key] / generic[key] if generic[key] else None
+                        for key in ("cpu_s_per_1000", "overhead_median_ms", "overhead_p99_ms")
+                    }
+                    for name in ("floor", "framed")
                 },
             }
         )
@@ -281,9 +361,9 @@ def main(argv: list[str] | None = None) -> int:
     started = now()
     rows = [row for case in cases for row in run_case(case, args.duration, args.rounds)]
     result = summary(rows)
-    print("\nMedians; fcmaster ÷ generic and the floor ÷ generic (same precise loop):")
+    print("\nMedians; fcmaster, the floor and framed ÷ generic (same precise loop):")
     for entry in result:
-        ratio, floor_ratio = entry["fcmaster_over_generic"], entry["floor_over_generic"]
+        ratio = entry["fcmaster_over_generic"]
         parts = []
         for name, m in entry["medians"].items():
             parts.append(
@@ -296,12 +376,14 @@ def main(argv: list[str] | None = None) -> int:
             "      ratios: "
             + ", ".join(f"{k} {v:.2f}" if v is not None else f"{k} -" for k, v in ratio.items())
         )
-        print(
-            "      the floor's: "
-            + ", ".join(
-                f"{k} {v:.2f}" if v is not None else f"{k} -" for k, v in floor_ratio.items()
+        for name in ("floor", "framed"):
+            print(
+                f"      the {name}'s: "
+                + ", ".join(
+                    f"{k} {v:.2f}" if v is not None else f"{k} -"
+                    for k, v in entry[f"{name}_over_generic"].items()
+                )
             )
-        )
     results_file.write(
         args.output,
         {
