@@ -129,88 +129,33 @@ async def run_generic(case: harness.Case, path: str, duration_s: float) -> dict[
     return {"start": start, "end": end, **counts, "cpu_s": cpu}
 
 
-async def run_floor(case: harness.Case, path: str, duration_s: float) -> dict[str, Any]:
-    """A reader callback and a pause timer on the bare descriptor: two wake-ups, no more."""
+Later = Callable[[float, Callable[[], None]], asyncio.TimerHandle]
+Callbacks = tuple[Callable[[], None], Callable[[], None]]  # the first poll's send, the reader
+# Given the descriptor, the counts to keep and the way to set a timer: its callbacks.
+CallbackMaster = Callable[[int, dict[str, int], Later], Callbacks]
+
+
+async def on_descriptor(
+    case: harness.Case, path: str, duration_s: float, master: CallbackMaster
+) -> dict[str, Any]:
+    """Run a callback master on the bare descriptor, measured as the others are.
+
+    The master sets its timers with ``later``, which keeps the one it set last: a callback
+    master has at most one pending (the pause's or the reply's deadline), and it is called
+    off before the port closes, so nothing writes to a closed descriptor.
+    """
     loop = asyncio.get_running_loop()
     port = harness.open_raw(case, path)
-    fd, pause = port.fileno(), case.pause_s
-    requests = itertools.cycle(harness.poll_requests(case))
+    fd = port.fileno()
     counts = {"replies": 0, "timeouts": 0}
-    heard = 0
+    timer: asyncio.TimerHandle | None = None
 
-    def send() -> None:
-        os.write(fd, next(requests))
+    def later(delay: float, callback: Callable[[], None]) -> asyncio.TimerHandle:
+        nonlocal timer
+        timer = loop.call_later(delay, callback)
+        return timer
 
-    def readable() -> None:
-        nonlocal heard
-        heard += len(os.read(fd, 256))
-        if heard >= harness.REPLY_LENGTH:
-            heard = 0
-            counts["replies"] += 1
-            loop.call_later(pause, send)
-
-    termios.tcflush(fd, termios.TCIFLUSH)  # what the master before this one left unread
-    loop.add_reader(fd, readable)
-    try:
-        send()
-        await asyncio.sleep(harness.WARMUP_S)
-        counts.update(replies=0)
-        cpu, start = time.process_time(), now()
-        await asyncio.sleep(duration_s)
-        end, cpu = now(), time.process_time() - cpu
-        replies = counts["replies"]
-    finally:
-        loop.remove_reader(fd)
-        port.close()
-    return {"start": start, "end": end, "replies": replies, "timeouts": 0, "cpu_s": cpu}
-
-
-async def run_framed(case: harness.Case, path: str, duration_s: float) -> dict[str, Any]:
-    """The floor, plus framing, checks, parsing through a cache, a frame log and a deadline."""
-    loop = asyncio.get_running_loop()
-    port = harness.open_raw(case, path)
-    fd, pause = port.fileno(), case.pause_s
-    codec, framer = FcCodec(), FcFramer()
-    key = codec.parameter("16-13")
-    exchanges = itertools.cycle([codec.read(a, key, 0, None)[0] for a in range(1, case.drives + 1)])
-    frames: deque[tuple[str, float, float, bytes]] = deque(maxlen=4096)
-    parsed: dict[bytes, tuple[bytes, Reply]] = {}
-    counts = {"replies": 0, "timeouts": 0}
-    exchange = next(exchanges)
-    deadline: asyncio.TimerHandle | None = None
-
-    def send() -> None:
-        nonlocal exchange, deadline
-        exchange = next(exchanges)
-        os.write(fd, exchange.request)
-        frames.append(("tx", now(), time.time(), exchange.request))
-        deadline = loop.call_later(TIMEOUT_S, timed_out)
-
-    def timed_out() -> None:
-        counts["timeouts"] += 1
-        framer.reset()
-        send()
-
-    def readable() -> None:
-        at = now()
-        framer.feed(os.read(fd, 256))
-        piece = framer.next_frame()
-        while piece is not None and not isinstance(piece, Frame):
-            piece = framer.next_frame()  # skipped bytes: what an earlier master left unread
-        if piece is None:
-            return  # more to come
-        frames.append(("rx", at, time.time(), piece.data))
-        last = parsed.get(exchange.request)
-        if last is None or last[0] != piece.data:
-            try:
-                parsed[exchange.request] = (piece.data, codec.parse(exchange, piece.data))
-            except UnexpectedReply:
-                return  # a late answer to an earlier request: wait on for this one's
-        if deadline is not None:
-            deadline.cancel()
-        counts["replies"] += 1
-        loop.call_later(at + pause - now(), send)
-
+    send, readable = master(fd, counts, later)
     termios.tcflush(fd, termios.TCIFLUSH)  # what the master before this one left unread
     loop.add_reader(fd, readable)
     try:
@@ -223,10 +168,84 @@ async def run_framed(case: harness.Case, path: str, duration_s: float) -> dict[s
         result = dict(counts)
     finally:
         loop.remove_reader(fd)
-        if deadline is not None:
-            deadline.cancel()
+        if timer is not None:
+            timer.cancel()
         port.close()
     return {"start": start, "end": end, **result, "cpu_s": cpu}
+
+
+async def run_floor(case: harness.Case, path: str, duration_s: float) -> dict[str, Any]:
+    """A reader callback and a pause timer on the bare descriptor: two wake-ups, no more."""
+    requests = itertools.cycle(harness.poll_requests(case))
+    pause = case.pause_s
+
+    def floor(fd: int, counts: dict[str, int], later: Later) -> Callbacks:
+        heard = 0
+
+        def send() -> None:
+            os.write(fd, next(requests))
+
+        def readable() -> None:
+            nonlocal heard
+            heard += len(os.read(fd, 256))
+            if heard >= harness.REPLY_LENGTH:
+                heard = 0
+                counts["replies"] += 1
+                later(pause, send)
+
+        return send, readable
+
+    return await on_descriptor(case, path, duration_s, floor)
+
+
+async def run_framed(case: harness.Case, path: str, duration_s: float) -> dict[str, Any]:
+    """The floor, plus framing, checks, parsing through a cache, a frame log and a deadline."""
+    pause = case.pause_s
+    codec, framer = FcCodec(), FcFramer()
+    key = codec.parameter("16-13")
+    exchanges = itertools.cycle([codec.read(a, key, 0, None)[0] for a in range(1, case.drives + 1)])
+    frames: deque[tuple[str, float, float, bytes]] = deque(maxlen=4096)
+    parsed: dict[bytes, tuple[bytes, Reply]] = {}
+
+    def framed(fd: int, counts: dict[str, int], later: Later) -> Callbacks:
+        exchange = next(exchanges)
+        deadline: asyncio.TimerHandle | None = None
+
+        def send() -> None:
+            nonlocal exchange, deadline
+            exchange = next(exchanges)
+            os.write(fd, exchange.request)
+            frames.append(("tx", now(), time.time(), exchange.request))
+            deadline = later(TIMEOUT_S, timed_out)
+
+        def timed_out() -> None:
+            counts["timeouts"] += 1
+            framer.reset()
+            send()
+
+        def readable() -> None:
+            at = now()
+            framer.feed(os.read(fd, 256))
+            piece = framer.next_frame()
+            while piece is not None and not isinstance(piece, Frame):
+                piece = framer.next_frame()  # skipped bytes: what an earlier master left unread
+            if piece is None:
+                return  # more to come
+            frames.append(("rx", at, time.time(), piece.data))
+            last = parsed.get(exchange.request)
+            if last is None or last[0] != piece.data:
+                try:
+                    parsed[exchange.request] = (piece.data, codec.parse(exchange, piece.data))
+                except UnexpectedReply:
+                    return  # a late answer to an earlier request: wait on for this one's
+            if deadline is not None:
+                deadline.cancel()
+            counts["replies"] += 1
+            later(at + pause - now(), send)
+
+        return send, readable
+
+    return await on_descriptor(case, path, duration_s, framed)
 
 
 MASTERS: Final[dict[str, tuple[Callable[..., Any], Callable[[], asyncio.AbstractEventLoop]]]] = {

@@ -132,13 +132,10 @@ class Receiver(asyncio.Protocol):
             return None
         self.framer, self.gap_s, self._handler = framer, gap_s, handler
         self._deadline = deadline
-        loop = self._loop = asyncio.get_running_loop()
+        self._loop = asyncio.get_running_loop()
         # Set for this read and cancelled when it ends: a timer kept for the next read
         # would fire during it, a wake-up for nothing (a cancelled one never wakes the loop).
-        # (_set_deadline_timer written out: this runs for every request.)
-        if self._deadline_timer is not None:
-            self._deadline_timer.cancel()
-        self._deadline_timer = loop.call_later(deadline - self._now(), self._on_deadline)
+        self._set_deadline_timer(deadline)
         if gap_s and framer.buffered:
             # A frame begun in an earlier read: the gap runs from its last bytes, on the gap
             # timer, which follows the chunks that arrive meanwhile (the deadline's would not).

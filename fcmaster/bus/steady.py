@@ -148,8 +148,7 @@ class SteadyPolling:
         except Exception as exc:  # the loop's supervision decides
             self._end(exc)
             return
-        # carries(nxt), written out: this runs for every reply
-        if nxt is None or nxt.kind is StepKind.COMMAND or not nxt.exchange.reply_length:
+        if nxt is None or not self.carries(nxt):
             self._end(None)
             return
         self._step = nxt
