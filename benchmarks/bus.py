@@ -23,7 +23,7 @@ and under asyncio's default loop (epoll) for comparison.
   is reported). What it cannot hide is the pty itself
   and its own wake-up when a request arrives: a real UART has neither.
 * The master is the real :class:`~fcmaster.bus.master.BusMaster` on the real
-  :class:`~fcmaster.bus.serial.SerialTransport`, opening the pty slave. Every drive is
+  :class:`~fcmaster.transport.serial.SerialTransport`, opening the pty slave. Every drive is
   monitor-only with the default monitor list, so every poll is a 16-byte parameter
   telegram answered by 16 bytes. Logging is at ``warning`` (the daemon's ``info`` would
   add a line per command completed). The transport is wrapped by :class:`TapTransport`,
@@ -106,11 +106,11 @@ from fcmaster import logsetup
 from fcmaster.bus.commands import Action, Command
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock, lower_timer_slack, new_event_loop
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
 from fcmaster.protocol.framing import Framer
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
+from fcmaster.transport.serial import SerialTransport
 
 REQUEST_LENGTH: Final = 16  # FC parameter telegram, both ways
 REPLY_LENGTH: Final = 16

@@ -23,9 +23,9 @@ import bus as harness
 
 from fcmaster import logsetup
 from fcmaster.bus.master import BusMaster
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock, new_event_loop
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
+from fcmaster.transport.serial import SerialTransport
 
 
 async def profile(case: harness.Case, path: str, seconds: float) -> tuple[pstats.Stats, int]:

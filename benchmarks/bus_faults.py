@@ -46,12 +46,12 @@ import results_file
 from fcmaster import logsetup
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock, new_event_loop
 from fcmaster.protocol.codec import Reply
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
 from fcmaster.protocol.drive import ControlIntent
 from fcmaster.sim import DriveSettings, FaultPlan, LineSettings, PtyServer, build_line
+from fcmaster.transport.serial import SerialTransport
 
 BAUD = 115200
 DELAY_S = 0.005  # the least FC 8-35 allows

@@ -9,7 +9,7 @@ replies leave on time and which notes when it heard each request's first byte an
 each reply's last byte was due). Against it, in turn, round after round:
 
 * **fcmaster**: the daemon's :class:`~fcmaster.bus.master.BusMaster` on the real
-  :class:`~fcmaster.bus.serial.SerialTransport` and :class:`~fcmaster.clock.MonotonicClock`
+  :class:`~fcmaster.transport.serial.SerialTransport` and :class:`~fcmaster.clock.MonotonicClock`
   under its precise event loop, monitor-only drives with the default monitor list (every
   poll a 16-byte FC parameter telegram answered by 16 bytes), nothing else running: no
   commands, no tap, no recording clock;
@@ -68,13 +68,13 @@ import serial_asyncio_fast
 
 from fcmaster import logsetup
 from fcmaster.bus.master import BusMaster
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock, new_event_loop
 from fcmaster.errors import UnexpectedReply
 from fcmaster.protocol.codec import Reply
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
 from fcmaster.protocol.danfoss_fc.framer import FcFramer
 from fcmaster.protocol.framing import Frame
+from fcmaster.transport.serial import SerialTransport
 
 DELAY_S: Final = 0.005
 TIMEOUT_S: Final = 0.1  # the generic master's reply timeout

@@ -15,7 +15,7 @@ of the line the master keeps busy with useful transactions:
   after exactly the drive's answer delay: with the default 0.1 ms lead, its 5 ms waits
   woke about 0.2 ms late, which the master was charged for.
 * The master is the real :class:`~fcmaster.bus.master.BusMaster` on the real
-  :class:`~fcmaster.bus.serial.SerialTransport`, the plan set up as the config does it
+  :class:`~fcmaster.transport.serial.SerialTransport`, the plan set up as the config does it
   (``codec_for``, the protocol's answer delay). Every drive is monitor-only with the
   protocol's default monitor list, so the line carries exactly the idle-poll rotation.
 * **line efficiency** = transactions per second ÷ the limit 1 / T, where T is the mean,
@@ -49,11 +49,11 @@ from fcmaster import logsetup
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock, new_event_loop
 from fcmaster.protocol.codec import DriveCodec, Exchange
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
 from fcmaster.sim.mitsubishi.drive import DEFAULT_CHECK_S
+from fcmaster.transport.serial import SerialTransport
 
 WARMUP_S: Final = 0.5
 SIM_MAX_LEAD_S: Final = 0.001  # as bus.py: the simulator may spin up to 1 ms to be on time

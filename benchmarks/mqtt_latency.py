@@ -44,7 +44,6 @@ from fcmaster.adapters.mqtt import MqttAdapter
 from fcmaster.adapters.settings import MqttSettings
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock, new_event_loop
 from fcmaster.config import parse
 from fcmaster.hub import Hub
@@ -52,6 +51,7 @@ from fcmaster.protocol.danfoss_fc import decode_telegram
 from fcmaster.service import Service
 from fcmaster.sim.service import sim_transport
 from fcmaster.state import FleetState
+from fcmaster.transport.pipe import Transport
 
 now = time.perf_counter
 NODELAY = ((socket.IPPROTO_TCP, socket.TCP_NODELAY, 1),)

@@ -39,17 +39,17 @@ import structlog
 from fcmaster.adapters.gateway import LineInfo
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
-from fcmaster.bus.echo import EchoCancellingTransport
 from fcmaster.bus.frame_log import FramesSince
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.serial import SerialTransport
-from fcmaster.bus.transport import Transport
 from fcmaster.bus.watchdog import WatchdogAudit
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import Config
 from fcmaster.hub import Hub
 from fcmaster.state import FleetState
+from fcmaster.transport.echo import EchoCancellingTransport
+from fcmaster.transport.pipe import Transport
+from fcmaster.transport.serial import SerialTransport
 
 log = structlog.get_logger("fcmaster.service")
 

@@ -7,7 +7,7 @@ import errno
 import os
 from pathlib import Path
 
-from fcmaster.bus.adapter import ASYNC_LOW_LATENCY, Machine
+from fcmaster.transport.usb import ASYNC_LOW_LATENCY, Machine
 
 FTDI_BY_ID = "usb-FTDI_FT232R_USB_UART_A10K1234-if00-port0"
 FTDI_BY_PATH = "pci-0000:00:14.0-usb-0:2:1.0-port0"

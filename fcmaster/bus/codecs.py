@@ -6,9 +6,7 @@ from dataclasses import replace
 
 from fcmaster.bus.plan import LinePlan
 from fcmaster.protocol.codec import DriveCodec
-from fcmaster.protocol.registry import NAMES, spec_for
-
-PROTOCOLS = NAMES
+from fcmaster.protocol.registry import spec_for
 
 
 def codec_for(plan: LinePlan) -> DriveCodec:

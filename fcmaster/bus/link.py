@@ -37,11 +37,11 @@ from functools import partial
 from fcmaster.bus.frame_log import RX, TX, FrameLog
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.stats import LineStats
-from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock
 from fcmaster.errors import MalformedReply, ProtocolError, ReplyTimeout, UnexpectedReply
 from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
 from fcmaster.protocol.framing import Frame, Framer, Skipped, SkipReason
+from fcmaster.transport.pipe import Transport
 
 ANSWER_SAMPLES = 8  # replies timed before deadlines follow the line
 RECORDED = 32  # frames and events the flight recorder keeps

@@ -54,12 +54,12 @@ from fcmaster.bus.planner import Completion, Planner, Step, StepKind
 from fcmaster.bus.reporting import LineReporter
 from fcmaster.bus.stats import DriveStats, LineStats
 from fcmaster.bus.steady import SteadyPolling
-from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.errors import (
     PortError,
 )
 from fcmaster.protocol.codec import DriveCodec, Reply
+from fcmaster.transport.pipe import Transport
 
 log = structlog.get_logger("fcmaster.bus")
 

@@ -63,7 +63,7 @@ The planner puts together parts with an interface each: the message types
 before it is queued), queue discipline (:mod:`~fcmaster.bus.queue`), polls, probes and
 liveness (:mod:`~fcmaster.bus.rotation`), the control-intent algebra
 (:mod:`~fcmaster.bus.intents`) and the commands waiting for confirmation
-(:mod:`~fcmaster.bus.confirming`). What is left here is a command's way through its exchanges
+(:mod:`~fcmaster.bus.unconfirmed`). What is left here is a command's way through its exchanges
 and what each reply or failure means for it.
 """
 
@@ -74,7 +74,6 @@ import dataclasses
 from fcmaster.bus import admission
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.confirm import LOCAL, needs_confirmation, note_ramp, ramp_keys
-from fcmaster.bus.confirming import Confirmations
 from fcmaster.bus.intents import (
     adopted,
     apply,
@@ -103,6 +102,7 @@ from fcmaster.bus.steps import (
     completion_of,
     result_of,
 )
+from fcmaster.bus.unconfirmed import Confirmations
 from fcmaster.protocol.codec import DriveCodec, Exchange, ParameterKey, Reply
 from fcmaster.protocol.drive import ControlIntent, Motion
 

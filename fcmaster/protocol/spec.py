@@ -253,7 +253,3 @@ class ProtocolSpec(Generic[OptionsT]):
         if self.watchdog_for is None:
             return self.watchdog
         return self.watchdog_for(self.options_of(source))
-
-    def owns_key(self, name: str) -> bool:
-        """Whether ``name`` is one of this protocol's own line keys."""
-        return any(k.name == name for k in self.line_keys)

@@ -5,7 +5,7 @@ Start a line in-process::
     clock = MonotonicClock()
     line = build_line(LineSettings(baudrate=19200), [(a, DriveSettings()) for a in range(1, 9)],
                       clock=clock)
-    transport = SimTransport(line, clock)   # a fcmaster.bus.transport.Transport
+    transport = SimTransport(line, clock)   # a fcmaster.transport.pipe.Transport
 
 or on a pty: ``async with PtyServer(line, clock=clock, link="/tmp/ttyFC") as server: ...``.
 """

@@ -1,6 +1,6 @@
 """The simulator in-process: a Transport onto a SimLine, and ``sim://NAME`` lookup.
 
-:class:`SimTransport` meets :class:`fcmaster.bus.transport.Transport`, so a BusMaster
+:class:`SimTransport` meets :class:`fcmaster.transport.pipe.Transport`, so a BusMaster
 talks to simulated drives exactly as to a serial port, with no pseudo-terminal in between.
 All waiting goes through the injected clock: with a virtual clock a whole bus runs in
 virtual time; with :class:`~fcmaster.clock.MonotonicClock` it takes as long as the wire.
@@ -16,7 +16,7 @@ SIM_SCHEME = "sim://"
 
 
 class SimTransport:
-    """A :class:`~fcmaster.bus.transport.Transport` on a simulated line."""
+    """A :class:`~fcmaster.transport.pipe.Transport` on a simulated line."""
 
     def __init__(self, line: SimLine, clock: Clock, *, port: str = "sim://") -> None:
         """Talk to ``line``, waiting on ``clock`` (which must be the clock the line reads)."""

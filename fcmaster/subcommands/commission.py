@@ -32,7 +32,6 @@ from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.link import Link
 from fcmaster.bus.master import BusMaster, BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, with_protocol_options
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.bus.stats import DriveStats
 from fcmaster.clock import MonotonicClock
 from fcmaster.errors import BusError, CommandError, UsageError
@@ -41,6 +40,7 @@ from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, hz_to_pct
 from fcmaster.protocol.registry import DEFAULT, spec_for
 from fcmaster.protocol.spec import OptionPairs
 from fcmaster.state import FleetState
+from fcmaster.transport.serial import SerialTransport
 
 # The actions a --frequency or --reference means something to.
 _TAKES_REFERENCE = (Action.START, Action.SET_REFERENCE, Action.FORWARD, Action.REVERSE)

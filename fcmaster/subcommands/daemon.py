@@ -11,13 +11,13 @@ import structlog
 
 from fcmaster import config as config_module
 from fcmaster import logsetup
-from fcmaster.bus.adapter import Machine
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.poll_round import poll_round_s
 from fcmaster.bus.rotation import probe_period_s
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.subcommands.ports import unstable_ports
+from fcmaster.transport.usb import Machine
 
 log = structlog.get_logger("fcmaster.cli")
 

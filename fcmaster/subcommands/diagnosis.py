@@ -11,10 +11,10 @@ import statistics
 from dataclasses import dataclass, field, replace
 from typing import Any, Final
 
-from fcmaster.bus.adapter import LOW_LATENCY_MS, UDEV_FILE, UDEV_RULE, Adapter
-from fcmaster.bus.adapter import max_transactions_per_s as adapter_limit
 from fcmaster.protocol.registry import PROTOCOLS, spec_for
 from fcmaster.protocol.spec import OptionPairs
+from fcmaster.transport.usb import LOW_LATENCY_MS, UDEV_FILE, UDEV_RULE, Adapter
+from fcmaster.transport.usb import max_transactions_per_s as adapter_limit
 
 NOISE_MIN_BYTES: Final = 3  # fewer stray bytes than this are a glitch (a port opening), not noise
 # Answers later than the drives' factory delay by this much (median) are held somewhere: a

@@ -29,10 +29,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Final
 
-from fcmaster.bus.codecs import PROTOCOLS, codec_for, with_protocol_delay
+from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import LinePlan, with_protocol_options
-from fcmaster.bus.serial import SerialTransport
-from fcmaster.bus.transport import Transport
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import load
 from fcmaster.errors import (
@@ -45,7 +43,7 @@ from fcmaster.errors import (
 )
 from fcmaster.protocol.codec import DriveCodec, Exchange
 from fcmaster.protocol.framing import Frame
-from fcmaster.protocol.registry import spec_for
+from fcmaster.protocol.registry import NAMES, spec_for
 from fcmaster.subcommands.diagnosis import (
     AddressReport,
     Expected,
@@ -55,6 +53,8 @@ from fcmaster.subcommands.diagnosis import (
     to_json,
     to_text,
 )
+from fcmaster.transport.pipe import Transport
+from fcmaster.transport.serial import SerialTransport
 
 # The rates each protocol's drives offer (fastest first) and the parities (factory first)
 # are its spec's baudrates and parities.
@@ -380,9 +380,9 @@ async def run(
         protocols: tuple[str, ...] = (protocol,)
     elif expected is not None:  # the config's protocol first, then the others
         first = expected.line.protocol
-        protocols = (first, *(p for p in PROTOCOLS if p != first))
+        protocols = (first, *(p for p in NAMES if p != first))
     else:
-        protocols = PROTOCOLS
+        protocols = NAMES
     show = sys.stderr.isatty()
 
     def progress(text: str) -> None:

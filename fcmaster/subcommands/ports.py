@@ -17,9 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
-from fcmaster.bus.adapter import LOW_LATENCY_MS, Adapter, Machine, list_adapters
 from fcmaster.bus.plan import LinePlan
 from fcmaster.config import load
+from fcmaster.transport.usb import LOW_LATENCY_MS, Adapter, Machine, list_adapters
 
 _KERNEL_NAME = re.compile(r"/dev/tty(USB|ACM)\d+")  # names the kernel hands out in plug order
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 import asyncio
 import random
 
-from fcmaster.bus.adapter import Adapter
 from fcmaster.bus.link import Link
 from fcmaster.bus.plan import LinePlan
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
+from fcmaster.transport.serial import SerialTransport
+from fcmaster.transport.usb import Adapter
 
 LATENCY_MS = 16
 POLLS = 24

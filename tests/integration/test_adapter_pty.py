@@ -9,13 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from fcmaster.bus import serial as serial_module
-from fcmaster.bus.adapter import Adapter
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
 from fcmaster.config import parse
 from fcmaster.service import Service
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
+from fcmaster.transport import serial as serial_module
+from fcmaster.transport.serial import SerialTransport
+from fcmaster.transport.usb import Adapter
 
 FTDI = Adapter(
     device="/dev/ttyUSB0", driver="ftdi_sio", by_id="/dev/serial/by-id/usb-FTDI-port0",

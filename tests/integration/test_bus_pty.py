@@ -16,7 +16,6 @@ import pytest
 from fcmaster.bus.commands import Action, Command, Outcome
 from fcmaster.bus.master import BACKOFF_MAX_S, BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
 from fcmaster.sim.build import build_line
@@ -24,6 +23,7 @@ from fcmaster.sim.danfoss_fc.drive import FcSimDrive
 from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
+from fcmaster.transport.serial import SerialTransport
 from tests.integration.line_checks import assert_faults_counted_and_no_command_lost
 from tests.integration.tcp_bridge import TcpBridge, tcp_bridge
 from tests.integration.waiting import wait_for

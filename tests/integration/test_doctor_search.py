@@ -8,12 +8,12 @@ rate and parity, and the line misframes every character sent at another.
 from __future__ import annotations
 
 from fcmaster.bus.plan import LinePlan
-from fcmaster.bus.transport import Transport
 from fcmaster.clock import MonotonicClock
 from fcmaster.sim import DriveSettings, LineSettings, build_line
 from fcmaster.sim.transport import SimTransport
 from fcmaster.subcommands.diagnosis import Expected, LineFormat, diagnose
 from fcmaster.subcommands.doctor import examine
+from fcmaster.transport.pipe import Transport
 
 
 async def test_drives_at_odd_parity_are_found_after_even_and_the_config_told() -> None:

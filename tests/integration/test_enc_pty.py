@@ -17,7 +17,6 @@ from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Outcome
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
 from fcmaster.hub import Hub
 from fcmaster.protocol.enc import StateWord
@@ -27,6 +26,7 @@ from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.state import FleetState
+from fcmaster.transport.serial import SerialTransport
 from tests.integration.line_checks import assert_faults_counted_and_no_command_lost
 from tests.integration.waiting import wait_for
 from tests.orders import orders

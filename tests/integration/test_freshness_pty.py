@@ -20,7 +20,6 @@ from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
 from fcmaster.protocol.codec import Reply
 from fcmaster.protocol.drive import ControlIntent
@@ -29,6 +28,7 @@ from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.state import DriveState, DriveUpdated, Event, FleetState
+from fcmaster.transport.serial import SerialTransport
 from tests.fakes import WallShiftedClock
 from tests.integration.waiting import wait_for
 from tests.orders import orders

@@ -13,7 +13,6 @@ from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.commands import Outcome
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
 from fcmaster.protocol.drive import Motion
 from fcmaster.protocol.mitsubishi import RESTART_S
@@ -22,6 +21,7 @@ from fcmaster.sim.faults import FaultPlan
 from fcmaster.sim.mitsubishi import MitsubishiSimDrive
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
+from fcmaster.transport.serial import SerialTransport
 from tests.integration.line_checks import assert_faults_counted_and_no_command_lost
 from tests.integration.waiting import wait_for
 from tests.orders import orders

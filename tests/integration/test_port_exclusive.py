@@ -15,12 +15,12 @@ from typing import Any
 import httpx
 import pytest
 
-from fcmaster.bus.serial import SerialTransport
 from fcmaster.clock import MonotonicClock
 from fcmaster.errors import PortInUse
 from fcmaster.sim.build import build_line
 from fcmaster.sim.pty import PtyServer
 from fcmaster.sim.settings import DriveSettings, LineSettings
+from fcmaster.transport.serial import SerialTransport
 from tests.integration.daemon_harness import START_S, child, get_json, until
 from tests.integration.ports import free_port
 

@@ -9,11 +9,12 @@ from typing import Any
 
 import pytest
 
-from fcmaster.bus.serial import SerialTransport, is_pty
 from fcmaster.clock import MonotonicClock
 from fcmaster.errors import PortError, ReplyTimeout
 from fcmaster.protocol.danfoss_fc.framer import FcFramer
-from fcmaster.protocol.framing import Frame, Skipped, SkipReason
+from fcmaster.protocol.framing import Frame, Framer, Skipped, SkipReason
+from fcmaster.transport.receiver import Piece
+from fcmaster.transport.serial import SerialTransport, is_pty
 from tests.integration.waiting import wait_for
 
 
@@ -80,6 +81,22 @@ async def test_bytes_are_stamped_when_they_arrive_not_when_they_are_read(
 FC_REPLY = b"\x02\x06\x81\x0f\x07\x20\x00\xad"
 
 
+async def read_frame(
+    transport: SerialTransport, framer: Framer, deadline: float, gap_s: float
+) -> Piece:
+    """The next piece through ``watch_frame``, awaited as the Link awaits a reply."""
+    waiter: asyncio.Future[Piece] = asyncio.get_running_loop().create_future()
+    piece = transport.watch_frame(framer, deadline, gap_s, waiter.set_result)
+    if piece is None:
+        try:
+            piece = await waiter
+        finally:
+            transport.unwatch()
+    if piece is None:
+        transport.check_open()
+    return piece
+
+
 async def test_a_frame_read_is_fed_in_the_callback_and_wakes_once_when_whole(
     pty_pair: tuple[int, str],
 ) -> None:
@@ -90,7 +107,7 @@ async def test_a_frame_read_is_fed_in_the_callback_and_wakes_once_when_whole(
     clock = MonotonicClock()
     framer = FcFramer()
     async with opened(path, baudrate=19200) as transport:
-        reader = asyncio.create_task(transport.read_frame(framer, clock.now() + 5.0, 1.0))
+        reader = asyncio.create_task(read_frame(transport, framer, clock.now() + 5.0, 1.0))
         await asyncio.sleep(0.01)
         os.write(controller, FC_REPLY[:3])
         await wait_for(lambda: framer.buffered == 3, timeout_s=5.0)
@@ -116,7 +133,7 @@ async def test_a_frame_read_ends_at_a_gap_after_an_unfinished_frame(
         deadline = clock.now() + 5.0
         os.write(controller, FC_REPLY[:4])
         async with asyncio.timeout(5):
-            piece = await transport.read_frame(framer, deadline, 0.05)
+            piece = await read_frame(transport, framer, deadline, 0.05)
         # Not the deadline: the gap after the half frame ended the read.
         assert piece is None
         assert clock.now() < deadline
@@ -140,7 +157,7 @@ async def test_a_frame_begun_in_an_earlier_read_is_cut_one_gap_after_its_last_ch
         await wait_for(lambda: transport.received_at > 0.0, timeout_s=5.0)
         first_at = transport.received_at
         await asyncio.sleep(0.2)  # nobody reads yet: the chunk waits in the buffer
-        reader = asyncio.create_task(transport.read_frame(framer, clock.now() + 5.0, gap))
+        reader = asyncio.create_task(read_frame(transport, framer, clock.now() + 5.0, gap))
         await asyncio.sleep(0.1)
         os.write(controller, FC_REPLY[3:5])
         await wait_for(lambda: framer.buffered == 5, timeout_s=5.0)
@@ -187,14 +204,14 @@ async def test_arrivals_and_deadlines_are_on_the_transports_clock_not_the_loops(
         # 50 ms, and the read ends then.
         deadline = clock.now() + 0.05
         async with asyncio.timeout(5):
-            assert await transport.read_frame(framer, deadline, 0.01) is None
+            assert await read_frame(transport, framer, deadline, 0.01) is None
             with pytest.raises(ReplyTimeout):
                 await transport.read(clock.now() + 0.05)
         assert clock.now() >= deadline
         before = clock.now()
         os.write(controller, FC_REPLY)
         async with asyncio.timeout(5):
-            piece = await transport.read_frame(framer, clock.now() + 5.0, 1.0)
+            piece = await read_frame(transport, framer, clock.now() + 5.0, 1.0)
         assert piece == Frame(FC_REPLY)
         assert before <= transport.received_at <= clock.now()  # stamped on the clock
 

@@ -14,9 +14,9 @@ import pytest
 import serial
 
 from fcmaster import cli
-from fcmaster.bus.open_errors import open_error
 from fcmaster.cli import build_parser, main
 from fcmaster.subcommands import daemon, decode
+from fcmaster.transport.open_errors import open_error
 
 NO_PORT = "/nonexistent/ttyUSB9"
 CONTROL = ("control", "--port", NO_PORT, "--address", "1")

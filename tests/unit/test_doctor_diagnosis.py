@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 
-from fcmaster.bus.adapter import Adapter
 from fcmaster.subcommands.diagnosis import (
     AddressReport,
     Expected,
@@ -14,6 +13,7 @@ from fcmaster.subcommands.diagnosis import (
     to_json,
     to_text,
 )
+from fcmaster.transport.usb import Adapter
 
 FC_19200 = LineFormat(protocol="danfoss-fc", baudrate=19200, parity="E", stopbits=1,
                       protocol_options=(("address_format", 126),))  # fmt: skip

@@ -8,13 +8,13 @@ from collections.abc import Callable
 
 import pytest
 
-from fcmaster.bus.adapter import Adapter
 from fcmaster.bus.plan import LinePlan
-from fcmaster.bus.transport import Transport
 from fcmaster.errors import PortError, UsageError
 from fcmaster.protocol.danfoss_fc import AddressFormat, Telegram, encode_telegram
 from fcmaster.subcommands.diagnosis import Survey, diagnose, to_text
 from fcmaster.subcommands.doctor import examine
+from fcmaster.transport.pipe import Transport
+from fcmaster.transport.usb import Adapter
 from tests.fakes import Responder, ScriptedTransport, Timed, VirtualClock
 
 READY = 0x0607

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from fcmaster.bus.adapter import Machine
 from fcmaster.subcommands import daemon, ports
+from fcmaster.transport.usb import Machine
 from tests.fake_machine import CH340_BY_ID, FTDI_BY_ID, FTDI_BY_PATH, FakeMachine
 
 CONFIG = """

@@ -27,6 +27,9 @@ FACES: dict[str, set[str]] = {
         "DriveStats", "LinePlan", "LineStats", "OnStart", "Outcome", "SerialTransport",
         "Transport",
     },
+    "fcmaster.transport": {
+        "SerialTransport", "Transport",
+    },
     "fcmaster.protocol": {
         "Access", "Condition", "ConditionReport", "ControlIntent", "DriveCodec", "DriveError",
         "DriveStatus", "Exchange", "Frame", "Framer", "FramerBuffer", "Motion", "ParameterKey",

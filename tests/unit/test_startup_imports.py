@@ -18,7 +18,7 @@ import fcmaster.bus
 from fcmaster.cli_arguments import build_parser
 from fcmaster.lazy_face import lazy_face
 
-HEAVY = ("fcmaster.bus.master", "fcmaster.bus.serial", "structlog", "serial", "asyncio")
+HEAVY = ("fcmaster.bus.master", "fcmaster.transport.serial", "structlog", "serial", "asyncio")
 
 
 def loaded_after(statement: str, modules: tuple[str, ...]) -> list[str]:

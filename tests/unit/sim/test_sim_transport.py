@@ -5,7 +5,6 @@ from __future__ import annotations
 import pytest
 
 import fcmaster.sim
-from fcmaster.bus.transport import Transport
 from fcmaster.errors import PortError, ReplyTimeout, UsageError
 from fcmaster.protocol.danfoss_fc import decode_telegram, encode_telegram
 from fcmaster.sim import (
@@ -16,6 +15,7 @@ from fcmaster.sim import (
     build_line,
     sim_name,
 )
+from fcmaster.transport.pipe import Transport
 from tests.fakes import FakeClock
 from tests.unit.sim.wire import START, control, fc_line, read
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from structlog.testing import capture_logs
 
-from fcmaster.bus.adapter import (
+from fcmaster.transport.usb import (
     ASYNC_LOW_LATENCY,
     UDEV_RULE,
     Adapter,

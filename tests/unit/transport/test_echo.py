@@ -6,12 +6,12 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from fcmaster.bus.echo import EchoCancellingTransport
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.errors import ReplyTimeout
 from fcmaster.protocol.danfoss_fc import Telegram, encode_telegram
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
+from fcmaster.transport.echo import EchoCancellingTransport
 from tests.fakes import ScriptedTransport, Timed, VirtualClock
 from tests.unit.bus.fcdrive import FcDrive, FcLine
 

@@ -1,4 +1,4 @@
-"""The ways a serial transport drives an open pyserial port (see :mod:`fcmaster.bus.serial`).
+"""The ways a serial transport drives an open pyserial port (see :mod:`fcmaster.transport.serial`).
 
 A local POSIX port is read and written on its descriptor (:class:`FdPort`); a URL handler
 with a descriptor of its own (``socket://``) goes through pyserial-asyncio-fast

@@ -9,7 +9,7 @@ whose handler has a descriptor of its own (``socket://``) go through pyserial-as
 Handlers without one (``rfc2217://``, whose client keeps its own socket and reader thread,
 and refuses the write timeout pyserial-asyncio sets) are read in a thread of their own that
 hands each chunk to the loop. Either way what arrives goes to a
-:class:`~fcmaster.bus.receiver.Receiver`: no StreamReader, no per-read task, and a reader
+:class:`~fcmaster.transport.receiver.Receiver`: no StreamReader, no per-read task, and a reader
 that hands over its framer is called once per reply, however it was split.
 
 Arrivals are stamped and deadlines are read on the transport's clock (the master's), which
@@ -34,14 +34,14 @@ import serial.rs485
 import serial_asyncio_fast
 import structlog
 
-from fcmaster.bus.adapter import Adapter, tune
-from fcmaster.bus.open_errors import open_error
-from fcmaster.bus.portlock import in_use_message, lock_refused
-from fcmaster.bus.ports import FdPort, Port, ThreadPort, UrlPort, has_descriptor
-from fcmaster.bus.receiver import Handler, Piece, Receiver
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.errors import PortError, PortInUse, ReplyTimeout
 from fcmaster.protocol.framing import Framer
+from fcmaster.transport.open_errors import open_error
+from fcmaster.transport.portlock import in_use_message, lock_refused
+from fcmaster.transport.ports import FdPort, Port, ThreadPort, UrlPort, has_descriptor
+from fcmaster.transport.receiver import Handler, Piece, Receiver
+from fcmaster.transport.usb import Adapter, tune
 
 log = structlog.get_logger("fcmaster.bus")
 
@@ -59,7 +59,7 @@ def is_pty(port: str) -> bool:
 
 
 class SerialTransport:
-    """A :class:`~fcmaster.bus.transport.Transport` on a serial port or pyserial URL."""
+    """A :class:`~fcmaster.transport.pipe.Transport` on a serial port or pyserial URL."""
 
     def __init__(
         self,
@@ -190,33 +190,16 @@ class SerialTransport:
         receiver.buffer.clear()
         return data
 
-    async def read_frame(self, framer: Framer, deadline: float, gap_s: float) -> Piece:
-        """The next piece ``framer`` cuts from the bytes received, waiting until ``deadline``.
-
-        None: the deadline passed, or a gap of ``gap_s`` followed an unfinished frame (the
-        caller tells them apart by the time). The bytes are fed to ``framer`` as they
-        arrive, in the reader callback, and the caller is woken once, when a piece is whole:
-        not for every chunk as :meth:`read` would. :attr:`received_at` is the arrival of
-        the bytes that completed the piece.
-        """
-        receiver = self._receiver
-        waiter: asyncio.Future[Piece] = asyncio.get_running_loop().create_future()
-        piece = receiver.watch(framer, deadline, gap_s, waiter.set_result)
-        if piece is None:
-            try:
-                piece = await waiter
-            finally:
-                receiver.unwatch()
-        if piece is None:
-            self.check_open()
-        return piece
-
     def watch_frame(self, framer: Framer, deadline: float, gap_s: float, handler: Handler) -> Piece:
-        """:meth:`read_frame` for a callback: ``handler`` gets what it would have returned.
+        """Feed ``framer`` in the reader callback; ``handler`` gets the next whole piece.
 
-        A piece whole already is returned, and ``handler`` is not called; otherwise it is
-        called once, later (see :meth:`Receiver.watch`). It calls :meth:`check_open` when
-        given None.
+        The bytes are fed to ``framer`` as they arrive, and ``handler`` is called once, when
+        a piece is whole, or with None when ``deadline`` passed or a gap of ``gap_s``
+        followed an unfinished frame (the caller tells them apart by the time): not a wake-up
+        for every chunk as :meth:`read` would be. :attr:`received_at` is then the arrival of
+        the bytes that completed the piece. A piece whole already is returned, and
+        ``handler`` is not called (see :meth:`Receiver.watch`). The caller calls
+        :meth:`check_open` when given None.
         """
         return self._receiver.watch(framer, deadline, gap_s, handler)
 

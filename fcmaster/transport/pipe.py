@@ -4,7 +4,7 @@ A transport moves bytes and nothing else: no framing, no retries, no timing poli
 ``typing.Protocol`` so the simulator's in-process line and test doubles meet it without
 inheriting from anything.
 
-A transport may offer more (:class:`~fcmaster.bus.serial.SerialTransport` does): a
+A transport may offer more (:class:`~fcmaster.transport.serial.SerialTransport` does): a
 ``write_now`` that takes the bytes from a plain callback, and a ``watch_frame`` that feeds
 a framer in its reader callback and calls back once a piece is whole (with ``unwatch`` and
 ``check_open``). The :class:`~fcmaster.bus.link.Link` then reads replies without a task

@@ -1,7 +1,7 @@
 import os
 from pathlib import Path
 
-from fcmaster.bus.portlock import in_use_message
+from fcmaster.transport.portlock import in_use_message
 
 
 def test_the_holder_is_named_from_the_lock_table(tmp_path: Path) -> None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from fcmaster.bus.transport import Transport
 from fcmaster.errors import ReplyTimeout
+from fcmaster.transport.pipe import Transport
 
 
 class EchoCancellingTransport:
