@@ -33,15 +33,14 @@ async def browser() -> AsyncIterator[Browser]:
         yield browser
 
 
-def _demo_with_operator(port: int) -> Config:
-    """The demo fleet as shipped, with an operator token so the page's buttons work."""
-    text = DEMO_CONFIG.read_text()
+def _demo_with_operator(port: int, text: str | None = None) -> Config:
+    """The demo fleet (as shipped, or ``text``) with an operator token for the page's buttons."""
     text = re.sub(
         r"(?m)^http:\n  listen: \S+",
         "http:\n"
         f"  listen: 127.0.0.1:{port}\n"
         f"  tokens:\n    - {{name: ops, role: operator, token: {OPERATOR}}}",
-        text,
+        DEMO_CONFIG.read_text() if text is None else text,
     )
     return parse_config(text)
 
@@ -139,6 +138,31 @@ async def test_reset_is_offered_only_for_a_trip_and_says_how_to_clear_a_short_wa
         await expect(view).to_contain_text("Too short: normal polling can trip the drive")
         await expect(view).to_contain_text("To clear it for good: set the drive's 8-03")
         await expect(view).not_to_contain_text("too_short")
+        assert problems == []
+
+
+async def test_the_demo_drive_tripped_by_its_watchdog_clears_once_the_advice_is_followed(
+    browser: Browser,
+) -> None:
+    """What the page and demo.yaml advise for supply-pump-2: a watchdog fcmaster writes."""
+    port = free_port()
+    text = DEMO_CONFIG.read_text()
+    short = "- {name: supply-pump-2, address: 2, control: bus, nominal_frequency_hz: 50, "
+    assert short in text
+    advised = text.replace(short, short + "watchdog: {timeout_s: 1}, ")
+    config = _demo_with_operator(port, advised)
+    async with dashboard(browser, config, port, fragment=f"token={OPERATOR}") as (page, problems):
+        row = page.locator('tr[data-drive="supply-pump-2"]')
+        await expect(row.get_by_test_id("watchdog")).to_have_text("watchdog ok", timeout=ONLINE_S)
+        reset = row.locator('button[data-action="reset"]')
+        await expect(reset).to_be_visible()  # tripped before its watchdog was rewritten
+        await press(page, reset)
+        await expect(page.get_by_test_id("confirm-detail")).to_be_hidden()  # nothing to warn of
+        await press(page, page.get_by_test_id("confirm").get_by_role("button", name="Confirm"))
+        await expect(page.get_by_test_id("toast")).to_contain_text("supply-pump-2: reset → done")
+        await expect(row.get_by_test_id("conditions")).to_have_text("", timeout=10000)
+        await expect(reset).to_be_hidden()
+        await expect(row.get_by_test_id("state")).not_to_contain_text("fault")
         assert problems == []
 
 
