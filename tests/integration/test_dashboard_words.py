@@ -230,4 +230,10 @@ async def test_values_of_every_vendor_read_in_one_style_with_each_unit_said_once
         view = page.get_by_test_id("dv-values")
         await expect(view).to_contain_text("Power (16-10)")
         await expect(view).not_to_contain_text("[kW]")
+        # a line's view says yes and no, not true and false
+        await page.go_back()
+        await press(page, page.locator('[data-bus="fc"]').get_by_test_id("open-line"))
+        stats = page.get_by_test_id("lv-stats")
+        await expect(stats).to_contain_text("line silentno")
+        await expect(stats).not_to_contain_text(re.compile(r"\b(true|false)\b"))
         assert problems == []

@@ -720,7 +720,8 @@ function updateLineView() {
       const text = key === "utilisation" ? `${fmt(value * 100)} %` : Number.isInteger(value) ? String(value) : fmtValue(value);
       facts.push([key.replaceAll("_", " "), text]);
     }
-    else if (typeof value === "string" || typeof value === "boolean") facts.push([key.replaceAll("_", " "), String(value)]);
+    else if (typeof value === "boolean") facts.push([key.replaceAll("_", " "), value ? "yes" : "no"]);
+    else if (typeof value === "string") facts.push([key.replaceAll("_", " "), value]);
   }
   replaceIf(detail, "stats", JSON.stringify(facts), $("lv-stats"),
             () => facts.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
