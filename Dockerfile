@@ -35,7 +35,11 @@ RUN python3 -m venv /opt/fcmaster
 WORKDIR /src
 COPY pyproject.toml README.md ./
 COPY fcmaster ./fcmaster
-RUN if [ -n "$CA_BUNDLE" ]; then export PIP_CERT=/etc/ssl/certs/ca-certificates.crt; fi \
+# (An argument given empty is dropped: pip would take "" for an index.)
+RUN { [ -n "$PIP_INDEX_URL" ] || unset PIP_INDEX_URL; } \
+    && { [ -n "$PIP_EXTRA_INDEX_URL" ] || unset PIP_EXTRA_INDEX_URL; } \
+    && { [ -n "$PIP_TRUSTED_HOST" ] || unset PIP_TRUSTED_HOST; } \
+    && if [ -n "$CA_BUNDLE" ]; then export PIP_CERT=/etc/ssl/certs/ca-certificates.crt; fi \
     && /opt/fcmaster/bin/pip install --no-cache-dir --disable-pip-version-check . \
     && /opt/fcmaster/bin/pip uninstall --yes pip setuptools \
     && /opt/fcmaster/bin/fcmaster check --config /src/fcmaster/demo.yaml

@@ -14,6 +14,7 @@ import json
 import os
 import re
 import signal
+import subprocess
 import sys
 from pathlib import Path
 
@@ -78,6 +79,8 @@ def test_the_image_exposes_modbus_and_takes_an_index_and_a_ca_at_build() -> None
         assert f"ARG {arg}" in build
     _, url = _healthcheck()
     assert url == "http://127.0.0.1:8080/"
+    for run in (i for i in instructions if i.startswith("RUN ")):  # each a valid sh script
+        assert subprocess.run(["sh", "-n", "-c", run[4:]], check=False).returncode == 0, run
 
 
 async def test_the_healthcheck_passes_while_the_daemon_serves_and_fails_when_it_is_gone(
