@@ -1,8 +1,8 @@
 """README.md's "Your first plant", taken from the README itself and run as written.
 
 Its ``plant.yaml`` passes ``fcmaster check``; the same file, with the serial port pointed at
-simulated drives and free listen ports, runs, and the section's curl and mbpoll commands do
-what the text says — including the stop of a drive at speed, which needs the response
+simulated drives, free listen ports and a real mosquitto, runs, and the section's curl and
+mbpoll commands do what the text says — including the stop of a drive at speed, which needs the response
 timeout the README gives (mbpoll's own 1 s is shorter than the drive's ramp-down).
 """
 
@@ -21,6 +21,7 @@ import httpx
 import pytest
 
 from tests.integration.daemon_harness import START_S, child, get_json, until
+from tests.integration.mosquitto import Broker, Recorder
 from tests.integration.ports import free_port
 
 README = Path(__file__).parents[2] / "README.md"
@@ -78,7 +79,10 @@ async def test_the_readme_curl_and_mbpoll_commands_work_as_written(tmp_path: Pat
     plant = plant.replace("port: /dev/ttyUSB0", "port: sim://line1")
     plant = plant.replace("127.0.0.1:8080", f"127.0.0.1:{http_port}")
     plant = plant.replace("127.0.0.1:5020", f"127.0.0.1:{modbus_port}")
-    plant = re.sub(r"(?ms)^mqtt:\n(  .*?\n)+", "", plant)  # no broker here: MQTT has tests
+    broker_directory = tmp_path / "mqtt"
+    broker_directory.mkdir()
+    broker = Broker(broker_directory)
+    plant = plant.replace("mqtt://127.0.0.1:1883", broker.url)
     config = tmp_path / "plant.yaml"
     config.write_text(plant)
 
@@ -92,6 +96,8 @@ async def test_the_readme_curl_and_mbpoll_commands_work_as_written(tmp_path: Pat
     assert [re.search(r"(\S+)\s+#", line) is not None for line in mbpolls] == [True] * 3
     read, start, stop = (here(line) for line in mbpolls)
     async with (
+        broker,
+        Recorder(broker, "fcmaster/#") as recorder,
         child("run", "--config", str(config), log=tmp_path / "run.log", env=TOKENS) as daemon,
         httpx.AsyncClient(base_url=f"http://127.0.0.1:{http_port}", timeout=10) as client,
     ):
@@ -101,6 +107,8 @@ async def test_the_readme_curl_and_mbpoll_commands_work_as_written(tmp_path: Pat
             return pump if pump["online"] and "watchdog" in pump else None
 
         await until(online, "supply-pump-1 online and audited", alive=daemon, timeout_s=START_S)
+        async with asyncio.timeout(START_S):  # and on MQTT, under the section's base topic
+            await recorder.wait_json("fcmaster/line1/supply-pump-1/state", lambda s: s["online"])
         # curl: an anonymous read, /metrics with the viewer's token, a start and a stop
         answers = [await _shell(here(line), TOKENS) for line in curls]
         assert all(code == 0 for code, _ in answers), answers
