@@ -2,8 +2,9 @@
 
 Its ``plant.yaml`` passes ``fcmaster check``; the same file, with the serial port pointed at
 simulated drives, free listen ports and a real mosquitto, runs, and the section's curl and
-mbpoll commands do what the text says — including the stop of a drive at speed, which needs the response
-timeout the README gives (mbpoll's own 1 s is shorter than the drive's ramp-down).
+mbpoll commands do what the text says — including the stop of a drive at speed, which needs
+the response timeout the README gives (mbpoll's own 1 s is shorter than the drive's
+ramp-down, and the drive stops all the same).
 """
 
 from __future__ import annotations
@@ -139,3 +140,9 @@ async def test_the_readme_curl_and_mbpoll_commands_work_as_written(tmp_path: Pat
         code, output = await _shell(stop.replace(" -o 10", ""), {})
         assert code != 0
         assert "timed out" in output
+
+        async def standing() -> dict[str, Any] | None:
+            pump: dict[str, Any] = await get_json(client, "/api/v1/drives/supply-pump-1")
+            return pump if not pump["running"] and pump["output_frequency_hz"] == 0 else None
+
+        await until(standing, "supply-pump-1 stopped all the same", alive=daemon)  # as it says
