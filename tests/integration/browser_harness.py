@@ -50,20 +50,24 @@ async def chromium() -> AsyncIterator[Browser]:
 async def press(page: Page, target: Locator) -> None:
     """A person's click: move there, press, hold 150 ms, release.
 
-    On a live table a cell's new text can move the button while the pointer travels; like a
-    person, the pointer goes where the button is now before pressing.
+    On a live page a cell's new text (or the browser restoring a scroll position) can move
+    the button while the pointer travels; like a person, the pointer goes where the button is
+    now, and presses once it is on it.
     """
-    box = None
-    for _ in range(10):
-        aimed = await target.bounding_box()
-        assert aimed is not None
-        if aimed == box:
+    for _ in range(20):
+        box = await target.bounding_box()
+        assert box is not None
+        x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        await page.mouse.move(x, y)
+        if await target.evaluate(_UNDER_POINTER, [x, y]):
             break
-        box = aimed
-        await page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        await asyncio.sleep(0.05)
     await page.mouse.down()
     await asyncio.sleep(HUMAN_PRESS_S)
     await page.mouse.up()
+
+
+_UNDER_POINTER = "(node, [x, y]) => node.contains(document.elementFromPoint(x, y))"
 
 
 @asynccontextmanager
