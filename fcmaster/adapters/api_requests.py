@@ -13,11 +13,13 @@ from typing import Annotated, Any
 
 import structlog
 from fastapi import Depends, Request, Security
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import Response
 from fastapi.routing import APIRoute
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.exceptions import HTTPException
 from starlette.requests import ClientDisconnect
+from starlette.types import Scope
 
 from fcmaster.adapters.auth import Authenticator, AuthError, Principal, Role
 from fcmaster.adapters.command_json import loads
@@ -56,6 +58,32 @@ class _StrictJsonRequest(Request):
         return self._json
 
 
+# What `curl -d` sends (form), what a hand-written request may say (text/plain), or nothing:
+# every body this API takes is JSON, so these are read as JSON. Bearer tokens keep that safe
+# from other sites' forms, which cannot send an Authorization header.
+_TAKEN_AS_JSON = frozenset({"", "application/x-www-form-urlencoded", "text/plain"})
+
+
+def as_json(scope: Scope, body: bytes) -> Scope:
+    """``scope`` with a body sent without ``Content-Type: application/json`` marked as JSON.
+
+    RequestValidationError, naming the header, for a body of another type (XML, multipart…).
+    """
+    if not body:
+        return scope
+    headers = [(k, v) for k, v in scope["headers"] if k != b"content-type"]
+    declared = dict(scope["headers"]).get(b"content-type", b"").decode("latin-1")
+    kind = declared.split(";")[0].strip().lower()
+    if kind == "application/json" or kind.endswith("+json"):
+        return scope
+    if kind not in _TAKEN_AS_JSON:
+        reason = f"the body must be JSON, sent with Content-Type: application/json, not {kind}"
+        raise RequestValidationError(
+            [{"type": "content_type", "loc": ("header", "content-type"), "msg": reason}]
+        )
+    return {**scope, "headers": [*headers, (b"content-type", b"application/json")]}
+
+
 class StrictJsonRoute(APIRoute):
     """Routes that read bodies by the command rules (a strict request)."""
 
@@ -67,7 +95,7 @@ class StrictJsonRoute(APIRoute):
             # Read through ``request``, which caches the body for the error handlers.
             body = await request.body()
             response: Response = await handler(
-                _StrictJsonRequest(request.scope, replaying(body, request.receive))
+                _StrictJsonRequest(as_json(request.scope, body), replaying(body, request.receive))
             )
             return response
 

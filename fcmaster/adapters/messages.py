@@ -4,7 +4,8 @@ The WebSocket stream (and anything else that wants them) sends one JSON object p
 told apart by ``type``:
 
 ==============  ===========================================================================
-``snapshot``    first message: ``drives`` (every drive state) and ``buses`` (every line)
+``snapshot``    first message: ``drives`` (every drive state), ``buses`` (every line) and
+                ``limits`` (each drive's configured nominal, min and max frequency in Hz)
 ``drive``       ``drive``: one drive's new state (conflated for slow clients: latest wins),
                 ``changed``: the fields that changed since its last message ([]: heartbeat)
 ``condition``   ``bus``, ``drive``, ``kind`` (alarm/warning), ``code``, ``text``, ``active``

@@ -31,6 +31,7 @@ from fcmaster.adapters.auth import Authenticator, AuthError
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.messages import event_json
 from fcmaster.adapters.middleware import states_json, strict_json
+from fcmaster.drive_state import DriveState
 from fcmaster.hub import Subscription
 
 log = structlog.get_logger("fcmaster.adapters.http")
@@ -70,6 +71,20 @@ def _origin_allowed(origin: str | None, host: str | None, allowed: tuple[str, ..
     return host is not None and urlsplit(origin).netloc.lower() == host.lower()
 
 
+def _limits(gateway: Gateway, states: list[DriveState]) -> dict[str, dict[str, float]]:
+    """Each drive's configured frequencies, so a page can say a reference's Hz."""
+    out: dict[str, dict[str, float]] = {}
+    for state in states:
+        plan = gateway.drive_plan(state.name)
+        if plan is not None:
+            out[state.name] = {
+                "nominal_frequency_hz": plan.nominal_frequency_hz,
+                "min_frequency_hz": plan.min_frequency_hz,
+                "max_frequency_hz": plan.max_frequency_hz,
+            }
+    return out
+
+
 async def serve_stream(
     websocket: WebSocket,
     gateway: Gateway,
@@ -101,15 +116,19 @@ async def serve_stream(
     try:
         await websocket.accept()
         log.debug("http.stream_opened", actor=principal.name, bus=bus, drive=drive)
-        drives = await states_json(
+        states = [
             s
             for s in gateway.fleet.snapshot()
             if (bus is None or s.bus == bus) and (drive is None or s.name == drive)
-        )
+        ]
+        drives = await states_json(states)
         lines = strict_json(
             [line.to_json() for line in gateway.lines() if bus in (None, line.name)]
         )
-        await websocket.send_text(f'{{"type": "snapshot", "drives": {drives}, "buses": {lines}}}')
+        limits = strict_json(_limits(gateway, states))
+        await websocket.send_text(
+            f'{{"type": "snapshot", "drives": {drives}, "buses": {lines}, "limits": {limits}}}'
+        )
         await _serve(websocket, subscription)
     except (WebSocketDisconnect, OSError):
         pass  # the client left while we were sending

@@ -7,21 +7,18 @@ reports; a monitor-only drive says the gateway does not command it.
 
 from __future__ import annotations
 
-import asyncio
+import re
 from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
 
 import pytest
-from playwright.async_api import Browser, Page, expect
+from playwright.async_api import Browser, expect
 
 from fcmaster.cli import DEMO_CONFIG
 from fcmaster.config import Config
 from fcmaster.config import load as load_config
 from fcmaster.config import parse as parse_config
-from fcmaster.service import Service
 from fcmaster.subcommands.daemon import with_http_listen
-from tests.integration.browser_harness import chromium, chromium_marks, press
-from tests.integration.http_harness import wait_until_listening
+from tests.integration.browser_harness import chromium, chromium_marks, dashboard, press
 from tests.integration.ports import free_port
 
 pytestmark = chromium_marks()
@@ -33,39 +30,22 @@ async def browser() -> AsyncIterator[Browser]:
         yield browser
 
 
-@asynccontextmanager
-async def _dashboard(
-    browser: Browser, config: Config, port: int, *, demo: bool = False
-) -> AsyncIterator[tuple[Page, list[str]]]:
-    """The daemon serving ``config`` and its dashboard open in a page; the page's errors."""
-    url = f"http://127.0.0.1:{port}"
-    service = Service(config, demo=demo)
-    task = asyncio.create_task(service.run(install_signals=False), name="test.dashboard")
-    try:
-        await wait_until_listening(url, timeout_s=30)
-        page = await browser.new_page(viewport={"width": 1280, "height": 900})
-        problems: list[str] = []
-        page.on("pageerror", lambda error: problems.append(str(error)))
-        await page.goto(url + "/")
-        yield page, problems
-    finally:
-        service.stop()
-        async with asyncio.timeout(10):
-            await task
-
-
 def _demo(port: int) -> Config:
     return with_http_listen(load_config(DEMO_CONFIG), f"127.0.0.1:{port}")
 
 
 async def test_the_drive_view_shows_the_watchdog_verdicts_of_the_demo(browser: Browser) -> None:
     port = free_port()
-    async with _dashboard(browser, _demo(port), port, demo=True) as (page, problems):
-        expected = {
-            "supply-pump-2": "too_short — timeout 0.1 s, action stop and trip",
-            "supply-pump-1": "ok — timeout 2 s, action stop",
-            "conveyor-1": "off — timeout – s, action off",
-            "mixer-1": "unknown — timeout 1 s, action select set-up 1",
+    async with dashboard(browser, _demo(port), port, demo=True) as (page, problems):
+        expected = {  # in words: never a raw token such as "too_short —"
+            "supply-pump-2": "Too short: normal polling can trip the drive "
+            "(timeout 0.1 s, action: stop and trip).",
+            "supply-pump-1": "OK: the drive stops by itself if the gateway dies "
+            "(timeout 2 s, action: stop).",
+            "conveyor-1": "Off: the motor keeps running if the gateway dies "
+            "(no timeout, action: off).",
+            "mixer-1": "Cannot be judged: what the drive does cannot be told from its settings "
+            "(timeout 1 s, action: select set-up 1).",
             "extractor-1": "monitor only",
         }
         for name, text in expected.items():
@@ -73,7 +53,9 @@ async def test_the_drive_view_shows_the_watchdog_verdicts_of_the_demo(browser: B
             # a person reads the table first: the row shows its verdict badge (or none)
             await expect(row.get_by_test_id("watchdog")).not_to_have_text("watchdog –")
             await press(page, row.get_by_test_id("open"))
-            await expect(page.get_by_test_id("dv-watchdog")).to_contain_text(text, timeout=20000)
+            view = page.get_by_test_id("dv-watchdog")
+            await expect(view).to_contain_text(text, timeout=20000)
+            await expect(view).not_to_contain_text(re.compile(r"too_short|—"))
             await page.go_back()
             await expect(page.get_by_test_id("drives")).to_be_visible()
         assert problems == []
@@ -81,7 +63,7 @@ async def test_the_drive_view_shows_the_watchdog_verdicts_of_the_demo(browser: B
 
 async def test_the_fleet_table_marks_every_watchdog_verdict_of_the_demo(browser: Browser) -> None:
     port = free_port()
-    async with _dashboard(browser, _demo(port), port, demo=True) as (page, problems):
+    async with dashboard(browser, _demo(port), port, demo=True) as (page, problems):
         # what demo.yaml's comments say each drive has (each set up by its simulation)
         expected = {
             "supply-pump-1": "watchdog ok",
@@ -132,7 +114,7 @@ async def test_a_drive_that_has_not_answered_says_so_and_shows_its_verdict_once_
     port = free_port()
     dark_s = 8  # the fan is unpowered for the first seconds
     config = parse_config(UNPOWERED.format(port=port, dark_s=dark_s))
-    async with _dashboard(browser, config, port) as (page, problems):
+    async with dashboard(browser, config, port) as (page, problems):
         pump = page.locator('tr[data-drive="pump"]').get_by_test_id("watchdog")
         fan = page.locator('tr[data-drive="fan"]').get_by_test_id("watchdog")
         await expect(pump).to_have_text("watchdog ok", timeout=10000)
@@ -143,7 +125,11 @@ async def test_a_drive_that_has_not_answered_says_so_and_shows_its_verdict_once_
             "not judged yet: the drive has not answered since the gateway started"
         )
         # powered up: audited when it comes online, and the view follows without a reload
-        await expect(view).to_contain_text("ok — timeout 1 s, action stop and trip", timeout=20000)
+        await expect(view).to_contain_text(
+            "OK: the drive stops by itself if the gateway dies "
+            "(timeout 1 s, action: stop and trip).",
+            timeout=20000,
+        )
         await page.go_back()
         await expect(fan).to_have_text("watchdog ok")
         assert problems == []

@@ -41,6 +41,13 @@ async def test_a_client_gets_a_snapshot_then_every_change() -> None:
         snapshot = await _next(ws, "snapshot")
         assert [d["name"] for d in snapshot["drives"]] == ["pump-1", "fan-1"]
         assert snapshot["buses"][0]["name"] == "line1"
+        # each drive's configured frequencies, so a page can say a reference's Hz
+        assert snapshot["limits"]["pump-1"] == {
+            "nominal_frequency_hz": 50.0,
+            "min_frequency_hz": 0.0,
+            "max_frequency_hz": 50.0,
+        }
+        assert set(snapshot["limits"]) == {"pump-1", "fan-1"}
 
         gateway.reply("pump-1", running=True, hz=12.5)
         assert (await _next(ws, "availability")) == {
@@ -86,6 +93,7 @@ async def test_a_stream_can_be_narrowed_to_one_drive() -> None:
         async with connect(url, additional_headers=VIEWER) as ws:
             snapshot = await _next(ws, "snapshot")
             assert [d["name"] for d in snapshot["drives"]] == ["fan-1"]
+            assert list(snapshot["limits"]) == ["fan-1"]
             gateway.reply("pump-1", hz=1.0)
             gateway.reply("fan-1", hz=2.0)
             update = await _next(ws, "drive")

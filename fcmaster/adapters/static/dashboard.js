@@ -16,7 +16,7 @@ const STALE_AFTER_S = 15;      // the daemon repeats a steady drive every 5 s
 const OLD_FREQUENCY_S = 2;     // a frequency read this much before the status is marked
 const WINDOW_S = 15 * 60;      // what the charts show
 
-const fleet = { drives: new Map(), buses: new Map() };
+const fleet = { drives: new Map(), buses: new Map(), limits: {} };  // limits: configured Hz per drive
 const rows = new Map();        // drive name -> its row and the text each cell shows
 const cards = new Map();       // line name -> its card
 const driveEvents = new Map(); // drive name -> recent event texts
@@ -157,6 +157,7 @@ function handle(message) {
       }
       fleet.buses.clear();
       for (const bus of message.buses) fleet.buses.set(bus.name, bus);
+      fleet.limits = message.limits || {};
       linesDirty = true;
       break;
     }
@@ -289,6 +290,7 @@ function updateRow(record, d) {
   replaceIf(record, "conditions", JSON.stringify(conditions), record.conditions,
             () => conditions.map(([cls, text, title]) => el("li", { class: cls, text, title })));
   if (record.commandsFor !== commandsKey(d)) fillCommands(record, d);
+  if (record.reset) record.reset.hidden = !hasSomethingToReset(d);  // only a trip needs one
   markStale(record, d);
 }
 
@@ -297,7 +299,9 @@ function stateParts(d) {
   const parts = [[d.running ? `running ${d.direction}` : "stopped", d.running ? "pill-up" : "pill-idle"]];
   if (d.fault) parts.push(["fault", "pill-down"]);
   if (d.warning) parts.push(["warning", "pill-warn"]);
-  if (d.running && d.at_reference) parts.push(["at reference", "pill-idle"]);
+  // Running at a reference of 0 the motor is powered but does not turn: "at reference" beside
+  // 0.00 Hz would read as all well, so it says the speed instead.
+  if (d.running && d.at_reference) parts.push(isStanding(d) ? ["at 0 Hz", "pill-warn"] : ["at reference", "pill-idle"]);
   return parts;
 }
 
@@ -310,6 +314,27 @@ const WATCHDOG_MEANING = {
   too_short: "normal polling can trip the drive",
   unknown: "what the drive does cannot be told from its settings",
 };
+const VERDICT_WORDS = { ok: "OK", off: "Off", too_short: "Too short", unknown: "Cannot be judged" };
+// Where each protocol keeps the watchdog's timeout (and FC its action), for the advice that
+// fixes a verdict; the daemon's log has the same advice with a value for the line.
+const WATCHDOG_PARAMETER = {
+  "danfoss-fc": "8-03 Control Word Timeout Time",
+  mitsubishi: "Pr.122 (PU connector) or Pr.336 (RS-485 terminals)",
+  enc: "F2.16",
+};
+const WATCHDOG_SWITCH = { "danfoss-fc": "8-04 Control Word Timeout Function to [2] Stop or [5] Stop and trip, and " };
+
+function watchdogAdvice(d) {
+  const w = d.watchdog;
+  if (!w || (w.verdict !== "too_short" && w.verdict !== "off")) return "";
+  const where = WATCHDOG_PARAMETER[d.protocol] || "communication timeout";
+  const how = "(fcmaster check prints the round; the daemon's log names a value), or give the drive " +
+    "watchdog: {timeout_s: …} in the config, which fcmaster writes when it takes the drive over.";
+  return w.verdict === "too_short"
+    ? ` To clear it for good: set the drive's ${where} longer than the line's poll round ${how} ` +
+      "Until then a Reset trips again."
+    : ` To have it stop: set the drive's ${WATCHDOG_SWITCH[d.protocol] || ""}${where} to a few poll rounds ${how}`;
+}
 
 function watchdogText(d) {
   if (d.control !== "bus") return "monitor only: the gateway does not command this drive";
@@ -318,8 +343,10 @@ function watchdogText(d) {
     return d.online ? "not judged yet: being read"
       : "not judged yet: the drive has not answered since the gateway started";
   }
-  const text = `${w.verdict} — timeout ${w.timeout_s ?? "–"} s, action ${w.action}: ${WATCHDOG_MEANING[w.verdict] || ""}`;
-  return d.online ? text : `${text} (as read when the drive was last online)`;
+  const timeout = w.timeout_s == null ? "no timeout" : `timeout ${w.timeout_s} s`;
+  const text = `${VERDICT_WORDS[w.verdict] || w.verdict}: ${WATCHDOG_MEANING[w.verdict] || w.verdict} ` +
+    `(${timeout}, action: ${w.action}).`;
+  return (d.online ? text : `${text} As read when the drive was last online.`) + watchdogAdvice(d);
 }
 
 function watchdogBadge(d) {
@@ -334,6 +361,8 @@ function pillNodes(parts) {
   return parts.map(([text, cls]) => el("span", { class: `pill ${cls}`, text }));
 }
 
+const isStanding = (d) => Math.abs(d.output_frequency_hz ?? 0) < 0.05;
+
 function frequencyIsOld(d) {
   const read = seconds(d.output_frequency_updated_at), status = seconds(d.updated_at);
   return read != null && status != null && status - read > OLD_FREQUENCY_S;
@@ -344,6 +373,18 @@ function frequencyTitle(d) {
   return read == null ? "output frequency not read yet" : `output frequency read at ${clock(read)}`;
 }
 
+// Each protocol's tables keep the manual's own names ("Motor Current", "Power [kW]", "output
+// current", "Output current"): the page shows them in one style, Title Case, with a
+// bracketed unit dropped where the value shows the same unit after it ("Power 2.40 kW").
+const SMALL_WORDS = new Set(["a", "an", "and", "as", "at", "by", "for", "in", "of", "on", "or", "per", "the", "to"]);
+
+function valueLabel(name, unit) {
+  const bare = name.replace(/\s*\[([^\]]+)\]$/, (whole, inside) =>
+    (unit && inside.toLowerCase() === unit.toLowerCase() ? "" : whole));
+  return bare.split(" ").map((word, i) => (i > 0 && SMALL_WORDS.has(word) ? word
+    : word.replace(/(^|[(/])(\p{Ll})/gu, (_, before, letter) => before + letter.toUpperCase()))).join(" ");
+}
+
 // The drive's monitored values as [parameter, name, "8.82 A", title]; alarm and warning
 // words are not values to read as numbers: their texts show under alarms and warnings.
 function measured(d) {
@@ -351,7 +392,7 @@ function measured(d) {
   for (const [param, v] of Object.entries(d.values || {})) {
     if (v.texts) continue;
     const read = seconds(v.updated_at);
-    out.push([param, v.name || param, `${fmtValue(v.value)}${v.unit ? ` ${v.unit}` : ""}`,
+    out.push([param, v.name ? valueLabel(v.name, v.unit) : param, `${fmtValue(v.value)}${v.unit ? ` ${v.unit}` : ""}`,
               read == null ? "" : `read at ${clock(read)}`]);
   }
   return out;
@@ -381,34 +422,74 @@ function fillCommands(record, d) {
   if (d.control !== "bus") { record.commands.replaceChildren("monitor only"); return; }
   const name = d.name;
   const hz = el("input", { type: "text", inputMode: "decimal", placeholder: "Hz", autocomplete: "off",
-                           "data-testid": "reference", title: "reference in Hz" });
-  const button = (label, body, question) => el("button", {
+                           "data-testid": "reference", title: "reference in Hz (Set), or the speed to Start at" });
+  const button = (label, body, question, detail = () => "") => el("button", {
     type: "button", text: label, "data-action": body.action,
-    onclick: () => confirmCommand(name, body, question),
+    onclick: () => confirmCommand(name, body, question, detail()),
   });
   const setReference = () => {
-    const value = Number.parseFloat(hz.value.replace(",", "."));
-    if (!Number.isFinite(value) || value < 0) { toast("Enter a reference in Hz first (0 or more)", true); return; }
+    const value = typedHz(hz.value);
+    if (value === null) { toast("Enter a reference in Hz first (0 or more)", true); return; }
     confirmCommand(name, { action: "set_reference", frequency_hz: value },
                    `Set ${name}'s reference to ${value} Hz?`);
+  };
+  // A start says the speed it will run at: the one typed beside it, else the reference the
+  // gateway commands now (which may be 0: powered, not turning).
+  const start = () => {
+    const drive = fleet.drives.get(name) || d;
+    if (!hz.value.trim()) { confirmCommand(name, { action: "start" }, `Start ${name}?`, startDetail(drive)); return; }
+    const value = typedHz(hz.value);
+    if (value === null) { toast("Enter a speed in Hz (0 or more), or empty the field to keep the present reference", true); return; }
+    confirmCommand(name, { action: "start", frequency_hz: value }, `Start ${name}?`,
+                   `It will run at ${value} Hz, the speed typed beside the buttons.`);
   };
   hz.addEventListener("keydown", (event) => {
     if (event.key !== "Enter") return;
     event.preventDefault();  // this Enter must not go on to press a button in the dialog
     setReference();
   });
+  const reset = button("Reset", { action: "reset" }, `Reset ${name}'s alarms?`, () => {
+    const drive = fleet.drives.get(name) || d;
+    return drive.watchdog?.verdict === "too_short"
+      ? `Its watchdog is too short for this line: polling will trip it again.${watchdogAdvice(drive)}` : "";
+  });
+  record.reset = reset;
+  reset.hidden = !hasSomethingToReset(d);
   record.commands.replaceChildren(el("div", { class: "commands" },
-    button("Start", { action: "start" }, `Start ${name}?`),
+    el("button", { type: "button", text: "Start", "data-action": "start", onclick: start }),
     button("Stop", { action: "stop" }, `Stop ${name}?`),
-    button("Reset", { action: "reset" }, `Reset ${name}'s alarms?`),
+    reset,
     hz,
     el("button", { type: "button", text: "Set", "data-action": "set_reference", onclick: setReference })));
 }
 
-function confirmCommand(name, body, question) {
+const hasSomethingToReset = (d) => Boolean(d.fault || d.alarms.length);
+
+function typedHz(text) {
+  const value = Number.parseFloat(text.replace(",", "."));
+  return Number.isFinite(value) && value >= 0 ? value : null;
+}
+
+// What a start without a typed speed runs at, in words: the commanded reference in Hz.
+function startDetail(d) {
+  const nominal = fleet.limits[d.name]?.nominal_frequency_hz;
+  let pct = d.reference_pct;
+  if (pct == null && !d.running) pct = 0;  // taken over standing: its reference is 0
+  if (pct == null) return `It runs already; it keeps its present output, ${fmt(d.output_frequency_hz, 2)} Hz.`;
+  if (pct < 0.005) {
+    return "Its reference is 0 Hz: the motor will be powered but will not turn. " +
+      "To start at a speed, type it in Hz beside the buttons first.";
+  }
+  const speed = nominal ? `${fmt((pct * nominal) / 100, 2)} Hz (${fmt(pct)} %)` : `${fmt(pct)} % of its nominal frequency`;
+  return `It will run at its present reference, ${speed}.`;
+}
+
+function confirmCommand(name, body, question, detail = "") {
   const dialog = $("confirm");
   if (dialog.open) return;
   $("confirm-text").textContent = question;
+  $("confirm-detail").textContent = detail;
+  $("confirm-detail").hidden = !detail;
   dialog.returnValue = "";
   dialog.onclose = async () => {
     if (dialog.returnValue !== "ok") return;
@@ -539,7 +620,8 @@ async function openDrive(name) {
   renderDriveEvents(name);
   current.t = history.t;
   current.series = history.series;
-  buildCharts(current, $("dv-charts"), history.series.map((s) => [s.key, s.name, s.unit]));
+  buildCharts(current, $("dv-charts"), history.series.map((s) => [s.key,
+    s.key === "output_frequency_hz" ? s.name : valueLabel(s.name, s.unit), s.unit]));
 }
 
 function updateDriveView(d) {
@@ -560,7 +642,7 @@ function updateDriveView(d) {
             () => facts.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
   put($("dv-watchdog"), watchdogText(d));
   const values = Object.entries(d.values || {}).map(([param, v]) => [
-    `${v.name || param} (${param})`,
+    `${v.name ? valueLabel(v.name, v.unit) : param} (${param})`,
     v.texts ? (v.texts.length ? v.texts.join(", ") : "none") : `${fmtValue(v.value)}${v.unit ? ` ${v.unit}` : ""}`,
     v.updated_at ? `read at ${clock(seconds(v.updated_at))}` : "",
   ]);
@@ -638,7 +720,8 @@ function updateLineView() {
       const text = key === "utilisation" ? `${fmt(value * 100)} %` : Number.isInteger(value) ? String(value) : fmtValue(value);
       facts.push([key.replaceAll("_", " "), text]);
     }
-    else if (typeof value === "string" || typeof value === "boolean") facts.push([key.replaceAll("_", " "), String(value)]);
+    else if (typeof value === "boolean") facts.push([key.replaceAll("_", " "), value ? "yes" : "no"]);
+    else if (typeof value === "string") facts.push([key.replaceAll("_", " "), value]);
   }
   replaceIf(detail, "stats", JSON.stringify(facts), $("lv-stats"),
             () => facts.flatMap(([k, v]) => [el("dt", { text: k }), el("dd", { text: v })]));
