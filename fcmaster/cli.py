@@ -171,6 +171,9 @@ def _cmd_doctor(args: argparse.Namespace) -> int:
 
 def _cmd_capture(args: argparse.Namespace) -> int:
     from fcmaster.subcommands import capture
+    from fcmaster.subcommands.paths import check_output
+
+    check_output(args.output, "-o")
 
     return _run_async(capture.capture(args.url, args.bus, args.seconds, args.output, args.token))
 
@@ -185,6 +188,10 @@ def _cmd_params(args: argparse.Namespace) -> int:
     from fcmaster.subcommands import params
 
     if args.params_command == "backup":
+        if args.output is not None:
+            from fcmaster.subcommands.paths import check_output
+
+            check_output(args.output, "-o")
         return _run_async(params.backup(_options(args), args.address, args.output))
     if args.params_command == "diff":
         options = _options(args) if args.port else None
@@ -224,7 +231,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command not in ("run", "decode", "check", "modbus-map", "ports"):
         from fcmaster import logsetup
 
-        logsetup.configure("warning")  # commissioning tools: only what needs attention
+        # commissioning tools: only what needs attention, in words even into a pipe or file;
+        # `status` says itself that its one drive is silent (no log line for the same)
+        logsetup.configure("error" if args.command == "status" else "warning", "console")
     try:
         code = COMMANDS[args.command](args)
         sys.stdout.flush()  # a reader that left shows here, not in the interpreter's exit

@@ -202,9 +202,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     )
     sim.add_argument("--protocol", choices=NAMES, default=DEFAULT)
     sim.add_argument("--addresses", type=_addresses, default=[1], help="e.g. 1-8 (default 1)")
-    sim.add_argument("--baudrate", type=int, default=19200)
-    sim.add_argument("--parity", choices=("N", "E", "O"), default="E")
-    sim.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
+    sim.add_argument("--baudrate", type=int, help="default: the protocol's factory setting")
+    sim.add_argument("--parity", choices=("N", "E", "O"))
+    sim.add_argument("--stopbits", type=int, choices=(1, 2))
     sim.add_argument("--name", default="line1", help="the bus name printed before the path")
     sim.add_argument("--link", help="also make this path a symbolic link to the pty")
     sim.add_argument(
@@ -257,7 +257,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     )  # fmt: skip
     capture.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
     capture.add_argument("--bus", required=True, metavar="NAME", help="the line to record")
-    capture.add_argument("--seconds", type=float, required=True, metavar="S", help="how long")
+    capture.add_argument("--seconds", type=_seconds, required=True, metavar="S", help="how long")
     capture.add_argument("-o", "--output", type=Path, required=True, metavar="FILE.pcapng")
     capture.add_argument("--token", help="a viewer token (default: $FCM_TOKEN)")
 
@@ -265,7 +265,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     monitor.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
     monitor.add_argument("--token", help="a viewer token (default: $FCM_TOKEN)")
     monitor.add_argument("--once", action="store_true", help="print one table and exit")
-    monitor.add_argument("--interval", type=float, default=0.5, help="seconds between redraws")
+    monitor.add_argument("--interval", type=_seconds, default=0.5, help="seconds between redraws")
 
     _params_parser(commands, full("params"))
 
