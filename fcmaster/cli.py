@@ -49,9 +49,10 @@ def _run_async(coro: Coroutine[Any, Any, int]) -> int:
 
 
 def _options(args: argparse.Namespace) -> Any:
+    """The line options of a port-opening command; UsageError for a bad one or address."""
     from fcmaster.subcommands.commission import LineOptions
 
-    return LineOptions(
+    options = LineOptions(
         port=args.port,
         protocol=args.protocol,
         baudrate=args.baudrate,
@@ -63,6 +64,12 @@ def _options(args: argparse.Namespace) -> Any:
             (key.name, getattr(args, key.name)) for key in spec_for(args.protocol).line_keys
         ),
     )
+    address = getattr(args, "address", None)
+    if address is not None:  # before the port opens: a wrong address is no line's failure
+        problem = spec_for(args.protocol).bad_address(options, address)
+        if problem:
+            raise UsageError(f"--address {problem}")
+    return options
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -159,7 +166,11 @@ def _cmd_ports(args: argparse.Namespace) -> int:
 
 
 def _cmd_doctor(args: argparse.Namespace) -> int:
+    from fcmaster.config_values import port_url_problem
     from fcmaster.subcommands import doctor
+
+    if problem := port_url_problem(args.port):
+        raise UsageError(f"--port {problem}")
 
     return _run_async(
         doctor.run(

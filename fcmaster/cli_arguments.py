@@ -9,17 +9,49 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from fcmaster import __version__
 from fcmaster.protocol.registry import DEFAULT, NAMES, PROTOCOLS
+from fcmaster.suggest import did_you_mean
 
 if TYPE_CHECKING:  # the specs load only for a command that opens a port
     from fcmaster.protocol.spec import LineKey
 
 DEMO_CONFIG = Path(__file__).resolve().parent / "demo.yaml"  # config/demo.yaml links here
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, naming the nearest known word when one was misspelled."""
+
+    def error(self, message: str) -> NoReturn:
+        """Exit 2 with ``message`` and, for an unknown choice or option, a 'did you mean'."""
+        choice = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if choice:
+            message += did_you_mean(choice[1], re.findall(r"'([^']*)'", choice[2]))
+        unknown = re.match(r"unrecognized arguments: (.*)", message)
+        for word in unknown[1].split() if unknown else ():
+            hint = (
+                did_you_mean(word.partition("=")[0], self._every_option())
+                if word[:2] == "--"
+                else ""
+            )
+            if hint:
+                message += hint
+                break
+        super().error(message)
+
+    def _every_option(self) -> list[str]:
+        """The long options of this parser and of every subcommand under it."""
+        found = [o for a in self._actions for o in a.option_strings if o.startswith("--")]
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    found += sub._every_option()
+        return found
 
 
 def _addresses(text: str) -> list[int]:
@@ -120,7 +152,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     def full(name: str) -> bool:
         return command is None or command == name
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fcmaster", description="RS-485 master for fleets of variable frequency drives."
     )
     parser.add_argument("--version", action="version", version=f"fcmaster {__version__}")

@@ -21,6 +21,8 @@ _SCHEME_ONLY = re.compile(r"([A-Za-z][A-Za-z0-9+.-]+):(?!//)")
 
 def port_url_problem(port: str) -> str:
     """What is wrong with a port URL ("" for a device path or a URL the master can open)."""
+    if not port.strip():
+        return "is empty: give a device path or a URL"
     scheme, separator, _rest = port.partition("://")
     if not separator:
         malformed = _SCHEME_ONLY.match(port)

@@ -36,7 +36,7 @@ from fcmaster.bus.plan import DrivePlan, LinePlan, with_protocol_options
 from fcmaster.bus.serial import SerialTransport
 from fcmaster.bus.stats import DriveStats
 from fcmaster.clock import MonotonicClock
-from fcmaster.config_values import baudrate_problem
+from fcmaster.config_values import baudrate_problem, port_url_problem
 from fcmaster.errors import BusError, CommandError, UsageError
 from fcmaster.protocol.codec import DriveCodec, Reply
 from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, hz_to_pct, pct_to_hz
@@ -65,6 +65,8 @@ class LineOptions:
     def __post_init__(self) -> None:
         spec = spec_for(self.protocol)
         problems = spec.option_problems(self.protocol_options)
+        if port_problem := port_url_problem(self.port):
+            problems.insert(0, f"--port {port_problem}")
         if self.baudrate is not None and self.baudrate not in spec.baudrates:
             problems.insert(0, f"--baudrate {baudrate_problem(spec, self.baudrate)}")
         if problems:
@@ -133,10 +135,11 @@ async def scan(options: LineOptions, addresses: list[int] | None, *, as_json: bo
     """
     found: list[dict[str, Any]] = []
     show_progress = sys.stderr.isatty()
-    async with _Session(options.plan()) as session:
-        addresses = list(session.codec.addresses) if addresses is None else addresses
-        for address in addresses:
-            _check_address(session.codec, address)
+    session = _Session(options.plan())
+    addresses = list(session.codec.addresses) if addresses is None else addresses
+    for address in addresses:  # before the port opens: a wrong address is the user's
+        _check_address(session.codec, address)
+    async with session:
         done = 0
         try:
             for done, address in enumerate(addresses, 1):
@@ -270,14 +273,15 @@ async def access(
     as_json: bool = False,
 ) -> int:
     """`read` (value None) or `write` one parameter."""
-    async with _Session(options.plan()) as session:
-        codec = session.codec
-        _check_address(codec, address)
-        key = codec.parameter(parameter)
-        if value is None:
-            exchanges = codec.read(address, key, index, None)
-        else:
-            exchanges = codec.write(address, key, index, _number(value), None, persist=persist)
+    session = _Session(options.plan())
+    codec = session.codec
+    _check_address(codec, address)  # the exchanges are built before the port opens: a
+    key = codec.parameter(parameter)  # mistake in them is the user's, not the line's
+    if value is None:
+        exchanges = codec.read(address, key, index, None)
+    else:
+        exchanges = codec.write(address, key, index, _number(value), None, persist=persist)
+    async with session:
         # Several exchanges (a Mitsubishi parameter: the page, then the access): the first
         # refusal or silence ends it; the last reply holds the value.
         reply: Reply | None = None

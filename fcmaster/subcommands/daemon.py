@@ -120,7 +120,9 @@ def check_listen(listen: str, *, overridden: bool) -> None:
             other = port + 1 if 0 < port < 65535 else 8081
             advice = f"it is taken (another fcmaster?); pass --http-listen {host}:{other}"
             raise UsageError(f"cannot serve HTTP at {host}:{port} ({where}): {advice}") from exc
-        if exc.errno == errno.EADDRNOTAVAIL:
+        if isinstance(exc, socket.gaierror) or (exc.errno or 0) < 0:  # getaddrinfo: EAI_*
+            advice = f"{host!r} is not an address of this machine nor a name that resolves"
+        elif exc.errno == errno.EADDRNOTAVAIL:
             advice = (
                 f"this machine has no address {host}; use one of its own, 127.0.0.1 for "
                 "this machine only, or 0.0.0.0 for every interface"

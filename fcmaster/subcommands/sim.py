@@ -164,6 +164,9 @@ async def _serve_lines(
     stop: asyncio.Event | None,
 ) -> int:
     out = out or sys.stdout
+    for name, _, link in lines:
+        if link is not None and not Path(link).parent.is_dir():  # the user's, not the pty's
+            raise UsageError(f"{name}: cannot link {link}: {Path(link).parent} is no directory")
     loop = asyncio.get_running_loop()
     handled: list[signal.Signals] = []
     if stop is None:
