@@ -159,13 +159,18 @@ def _mid_run_capture(master: BusMaster, after_s: float) -> Capture:
     return replace(whole, packets=later)
 
 
-async def _fc_capture_of_bus_drives() -> tuple[LinePlan, Capture]:
+async def _capture_of_bus_drives(protocol: str = "danfoss-fc") -> tuple[LinePlan, Capture]:
+    """A capture begun mid-run on a master commanding two drives, the first one running."""
+    first_address = codec_for(_plan(protocol)).addresses.start + 1
+    addresses = (first_address, first_address + 1)
     plan = replace(
-        _plan("danfoss-fc"),
-        drives=tuple(DrivePlan(name=f"d{a}", address=a, control=True) for a in (1, 2)),
+        _plan(protocol),
+        drives=tuple(
+            DrivePlan(name=f"d{i}", address=a, control=True) for i, a in enumerate(addresses, 1)
+        ),
     )
     clock = VirtualClock()
-    line = sim_line(plan, {"drives": {1: {"running_hz": 30}}}, clock=clock)
+    line = sim_line(plan, {"drives": {first_address: {"running_hz": 30}}}, clock=clock)
     first = BusMaster(plan, codec=codec_for(plan), transport=SimTransport(line, clock), clock=clock)
     async with first:
         await clock.run_for(3.0)
@@ -187,13 +192,14 @@ async def _states_on_replay(plan: LinePlan, capture: Capture) -> FleetState:
 
 
 @pytest.mark.parametrize("control", [True, False])
+@pytest.mark.parametrize("protocol", sorted(pcapng.LINK_TYPES))
 async def test_a_daemon_on_the_replay_sees_the_captured_drives_whatever_it_commands(
-    control: bool,
+    protocol: str, control: bool
 ) -> None:
-    # Captured mid-run from a master commanding its drives: a master starting afresh (first
-    # polls with the control word marked not valid) or a monitor-only one asks the same
-    # questions with other control words, and gets the captured drives' answers.
-    plan, capture = await _fc_capture_of_bus_drives()
+    # Captured mid-run from a master commanding its drives: a master starting afresh (FC:
+    # first polls with the control word marked not valid) or a monitor-only one asks the
+    # same questions with other control words, and gets the captured drives' answers.
+    plan, capture = await _capture_of_bus_drives(protocol)
     drives = tuple(replace(d, control=control) for d in plan.drives)
     fleet = await _states_on_replay(replace(plan, drives=drives), capture)
     one, two = fleet.get("north", "d1"), fleet.get("north", "d2")
@@ -209,11 +215,12 @@ async def test_a_daemon_on_the_replay_sees_the_captured_drives_whatever_it_comma
 async def test_a_commissioning_poll_gets_the_drives_latest_status_and_unknowns_stay_silent() -> (
     None
 ):
-    plan, capture = await _fc_capture_of_bus_drives()
+    plan, capture = await _capture_of_bus_drives()
     (replayed,) = replay_lines(capture)
     drive = ReplayDrive(replayed.answers, rules=FC_RULES, sequence=replayed.sequence)
     codec = codec_for(plan)
-    for address, running in ((1, True), (2, False)):
+    one, two = (drive.address for drive in plan.drives)
+    for address, running in ((one, True), (two, False)):
         poll = codec.poll(address, None, None)  # a scan's: control word 0, no parameter
         assert poll.request not in replayed.answers
         reply = drive.handle(poll.request, 0.0)
@@ -225,6 +232,6 @@ async def test_a_commissioning_poll_gets_the_drives_latest_status_and_unknowns_s
         value = codec.parse(read, drive.handle(read.request, 0.0) or b"").value
         assert value is not None
         assert value.unit == "A"
-    never_read = codec.read(1, codec.parameter("1-20"), 0, None)[0]
+    never_read = codec.read(one, codec.parameter("1-20"), 0, None)[0]
     assert drive.handle(never_read.request, 0.0) is None  # a question never asked
     assert drive.handle(codec.poll(9, None, None).request, 0.0) is None  # a drive not there
