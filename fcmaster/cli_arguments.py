@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
@@ -27,6 +28,15 @@ DEMO_CONFIG = Path(__file__).resolve().parent / "demo.yaml"  # config/demo.yaml 
 class _Parser(argparse.ArgumentParser):
     """argparse's parser, naming the nearest known word when one was misspelled."""
 
+    _words: tuple[str, ...] = ()  # the command line being parsed
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: list[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        """As argparse's, keeping the words for :meth:`error`."""
+        self._words = tuple(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
+
     def error(self, message: str) -> NoReturn:
         """Exit 2 with ``message`` and, for an unknown choice or option, a 'did you mean'."""
         choice = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
@@ -34,23 +44,21 @@ class _Parser(argparse.ArgumentParser):
             message += did_you_mean(choice[1], re.findall(r"'([^']*)'", choice[2]))
         unknown = re.match(r"unrecognized arguments: (.*)", message)
         for word in unknown[1].split() if unknown else ():
-            hint = (
-                did_you_mean(word.partition("=")[0], self._every_option())
-                if word[:2] == "--"
-                else ""
-            )
+            hint = did_you_mean(word.partition("=")[0], self._options()) if word[:2] == "--" else ""
             if hint:
                 message += hint
                 break
         super().error(message)
 
-    def _every_option(self) -> list[str]:
-        """The long options of this parser and of every subcommand under it."""
+    def _options(self) -> list[str]:
+        """The long options of this parser and of the subcommands named on the line."""
         found = [o for a in self._actions for o in a.option_strings if o.startswith("--")]
         for action in self._actions:
             if isinstance(action, argparse._SubParsersAction):
-                for sub in action.choices.values():
-                    found += sub._every_option()
+                for name, sub in action.choices.items():
+                    if name in self._words:
+                        sub._words = self._words
+                        found += sub._options()
         return found
 
 

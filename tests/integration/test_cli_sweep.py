@@ -50,7 +50,7 @@ CASES: list[tuple[tuple[str, ...], int, str]] = [
     (("scan", *LINE, "--addresses", "-5"), USAGE, "is not like 1-126"),
     (("scan", *LINE, "--timeout", "-1"), USAGE, "not a positive number of seconds"),
     (("scan", *LINE, "--protocol", "enk"), USAGE, "did you mean 'enc'?"),
-    (("scan", *LINE, "--adress", "3"), USAGE, "did you mean '--address'?"),
+    (("scan", *LINE, "--adress", "3"), USAGE, "did you mean '--addresses'?"),
     (("scan", "--port", "socket:/10.0.0.5:4001"), USAGE, "write socket://host:port"),
     (("scan", "--port", "socket://"), USAGE, "use socket://host:port"),
     (("scan", "--port", "socket://host:99999"), USAGE, "use socket://host:port"),
