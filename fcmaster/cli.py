@@ -263,6 +263,10 @@ def main(argv: list[str] | None = None) -> int:
     except (BusError, CommandError, FcmasterError) as exc:
         print(f"fcmaster {args.command}: {exc}", file=sys.stderr)
         return EXIT_FAILED
+    except OSError as exc:  # a file or device that failed after its checks: said, not traced
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"fcmaster {args.command}: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_FAILED
     except KeyboardInterrupt:
         return 130
 

@@ -1,4 +1,4 @@
-"""A misspelled command, option or choice on the command line: the nearest known one."""
+"""Mistakes on the command line: the nearest known word, and no traceback for a failed file."""
 
 from __future__ import annotations
 
@@ -33,3 +33,18 @@ def test_nothing_close_gets_no_guess(capsys: pytest.CaptureFixture[str]) -> None
     with pytest.raises(SystemExit):
         main(["xyzzy"])
     assert "did you mean" not in capsys.readouterr().err
+
+
+def test_a_file_that_fails_after_its_checks_is_said_without_a_traceback(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from fcmaster import cli
+
+    def full_disk(_: object) -> int:
+        raise OSError(28, "No space left on device", "/var/backup/pump.yaml")
+
+    monkeypatch.setitem(cli.COMMANDS, "ports", full_disk)
+    assert main(["ports"]) == 1
+    assert capsys.readouterr().err == (
+        "fcmaster ports: /var/backup/pump.yaml: No space left on device\n"
+    )
