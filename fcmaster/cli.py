@@ -49,9 +49,10 @@ def _run_async(coro: Coroutine[Any, Any, int]) -> int:
 
 
 def _options(args: argparse.Namespace) -> Any:
+    """The line options of a port-opening command; UsageError for a bad one or address."""
     from fcmaster.subcommands.commission import LineOptions
 
-    return LineOptions(
+    options = LineOptions(
         port=args.port,
         protocol=args.protocol,
         baudrate=args.baudrate,
@@ -63,6 +64,12 @@ def _options(args: argparse.Namespace) -> Any:
             (key.name, getattr(args, key.name)) for key in spec_for(args.protocol).line_keys
         ),
     )
+    address = getattr(args, "address", None)
+    if address is not None:  # before the port opens: a wrong address is no line's failure
+        problem = spec_for(args.protocol).bad_address(options, address)
+        if problem:
+            raise UsageError(f"--address {problem}")
+    return options
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -159,7 +166,11 @@ def _cmd_ports(args: argparse.Namespace) -> int:
 
 
 def _cmd_doctor(args: argparse.Namespace) -> int:
+    from fcmaster.config_values import port_url_problem
     from fcmaster.subcommands import doctor
+
+    if problem := port_url_problem(args.port):
+        raise UsageError(f"--port {problem}")
 
     return _run_async(
         doctor.run(
@@ -171,6 +182,9 @@ def _cmd_doctor(args: argparse.Namespace) -> int:
 
 def _cmd_capture(args: argparse.Namespace) -> int:
     from fcmaster.subcommands import capture
+    from fcmaster.subcommands.paths import check_output
+
+    check_output(args.output, "-o")
 
     return _run_async(capture.capture(args.url, args.bus, args.seconds, args.output, args.token))
 
@@ -185,6 +199,10 @@ def _cmd_params(args: argparse.Namespace) -> int:
     from fcmaster.subcommands import params
 
     if args.params_command == "backup":
+        if args.output is not None:
+            from fcmaster.subcommands.paths import check_output
+
+            check_output(args.output, "-o")
         return _run_async(params.backup(_options(args), args.address, args.output))
     if args.params_command == "diff":
         options = _options(args) if args.port else None
@@ -224,7 +242,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command not in ("run", "decode", "check", "modbus-map", "ports"):
         from fcmaster import logsetup
 
-        logsetup.configure("warning")  # commissioning tools: only what needs attention
+        # commissioning tools: only what needs attention, in words even into a pipe or file;
+        # `status` says itself that its one drive is silent (no log line for the same)
+        logsetup.configure("error" if args.command == "status" else "warning", "console")
     try:
         code = COMMANDS[args.command](args)
         sys.stdout.flush()  # a reader that left shows here, not in the interpreter's exit
@@ -242,6 +262,10 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     except (BusError, CommandError, FcmasterError) as exc:
         print(f"fcmaster {args.command}: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except OSError as exc:  # a file or device that failed after its checks: said, not traced
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"fcmaster {args.command}: {where}{exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         return 130

@@ -9,17 +9,57 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
+import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from fcmaster import __version__
 from fcmaster.protocol.registry import DEFAULT, NAMES, PROTOCOLS
+from fcmaster.suggest import did_you_mean
 
 if TYPE_CHECKING:  # the specs load only for a command that opens a port
     from fcmaster.protocol.spec import LineKey
 
 DEMO_CONFIG = Path(__file__).resolve().parent / "demo.yaml"  # config/demo.yaml links here
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, naming the nearest known word when one was misspelled."""
+
+    _words: tuple[str, ...] = ()  # the command line being parsed
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: list[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        """As argparse's, keeping the words for :meth:`error`."""
+        self._words = tuple(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
+
+    def error(self, message: str) -> NoReturn:
+        """Exit 2 with ``message`` and, for an unknown choice or option, a 'did you mean'."""
+        choice = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if choice:
+            message += did_you_mean(choice[1], re.findall(r"'([^']*)'", choice[2]))
+        unknown = re.match(r"unrecognized arguments: (.*)", message)
+        for word in unknown[1].split() if unknown else ():
+            hint = did_you_mean(word.partition("=")[0], self._options()) if word[:2] == "--" else ""
+            if hint:
+                message += hint
+                break
+        super().error(message)
+
+    def _options(self) -> list[str]:
+        """The long options of this parser and of the subcommands named on the line."""
+        found = [o for a in self._actions for o in a.option_strings if o.startswith("--")]
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    if name in self._words:
+                        sub._words = self._words
+                        found += sub._options()
+        return found
 
 
 def _addresses(text: str) -> list[int]:
@@ -120,7 +160,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     def full(name: str) -> bool:
         return command is None or command == name
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fcmaster", description="RS-485 master for fleets of variable frequency drives."
     )
     parser.add_argument("--version", action="version", version=f"fcmaster {__version__}")
@@ -202,9 +242,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     )
     sim.add_argument("--protocol", choices=NAMES, default=DEFAULT)
     sim.add_argument("--addresses", type=_addresses, default=[1], help="e.g. 1-8 (default 1)")
-    sim.add_argument("--baudrate", type=int, default=19200)
-    sim.add_argument("--parity", choices=("N", "E", "O"), default="E")
-    sim.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
+    sim.add_argument("--baudrate", type=int, help="default: the protocol's factory setting")
+    sim.add_argument("--parity", choices=("N", "E", "O"))
+    sim.add_argument("--stopbits", type=int, choices=(1, 2))
     sim.add_argument("--name", default="line1", help="the bus name printed before the path")
     sim.add_argument("--link", help="also make this path a symbolic link to the pty")
     sim.add_argument(
@@ -257,7 +297,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     )  # fmt: skip
     capture.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
     capture.add_argument("--bus", required=True, metavar="NAME", help="the line to record")
-    capture.add_argument("--seconds", type=float, required=True, metavar="S", help="how long")
+    capture.add_argument("--seconds", type=_seconds, required=True, metavar="S", help="how long")
     capture.add_argument("-o", "--output", type=Path, required=True, metavar="FILE.pcapng")
     capture.add_argument("--token", help="a viewer token (default: $FCM_TOKEN)")
 
@@ -265,7 +305,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     monitor.add_argument("--url", default="http://127.0.0.1:8080", help="the daemon's HTTP API")
     monitor.add_argument("--token", help="a viewer token (default: $FCM_TOKEN)")
     monitor.add_argument("--once", action="store_true", help="print one table and exit")
-    monitor.add_argument("--interval", type=float, default=0.5, help="seconds between redraws")
+    monitor.add_argument("--interval", type=_seconds, default=0.5, help="seconds between redraws")
 
     _params_parser(commands, full("params"))
 

@@ -36,12 +36,14 @@ from pydantic import (
     TypeAdapter,
     ValidationError,
     create_model,
+    model_validator,
 )
 
 from fcmaster.adapters.auth import listen_problem
 from fcmaster.adapters.settings import HttpSettings, ModbusSettings, MqttSettings
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.config_hints import in_words, yaml_problem
 from fcmaster.config_modbus import check_modbus, modbus_units
 from fcmaster.config_sections import (
     HttpModel,
@@ -53,9 +55,9 @@ from fcmaster.config_sections import (
     TokenModel,
 )
 from fcmaster.config_sections import StrictModel as _Model
-from fcmaster.config_values import check_name, port_url_problem
+from fcmaster.config_values import baudrate_problem, check_name, port_url_problem
 from fcmaster.config_watchdog import WatchdogModel, watchdog_plan, watchdogs_outlast_round
-from fcmaster.config_yaml import describe_error, substitute
+from fcmaster.config_yaml import substitute
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.protocol.registry import DEFAULT, NAMES, line_keys, spec_for
 from fcmaster.protocol.spec import LineKey
@@ -106,7 +108,9 @@ class BusFields(_Model):
     name: str = Field(min_length=1)
     port: str = Field(min_length=1)
     protocol: ProtocolName = DEFAULT
-    baudrate: int = Field(default=19200, gt=0)
+    # Left out: the protocol's factory setting (see _factory_settings); these defaults
+    # stand only for a bus whose protocol is unknown, which is refused anyway.
+    baudrate: int = Field(default=9600, gt=0)
     parity: Literal["N", "E", "O"] = "E"
     stopbits: Literal[1, 2] = 1
     databits: Literal[7, 8] = 8
@@ -122,6 +126,23 @@ class BusFields(_Model):
     rs485: bool = False
     simulation: dict[str, Any] | None = None  # sim:// ports: what the simulated drives do
     drives: list[DriveModel] = Field(default_factory=list)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _factory_settings(cls, data: Any) -> Any:
+        """The serial settings a bus leaves out are its protocol's factory settings.
+
+        As the CLI tools and the simulator take them, so a line that the drives' own
+        defaults would make talk does so with none of the three keys written.
+        """
+        if not isinstance(data, dict):
+            return data
+        protocol = data.get("protocol", DEFAULT)
+        if not isinstance(protocol, str) or protocol not in NAMES:
+            return data  # refused by the field, with the names that are known
+        factory = spec_for(protocol).factory
+        defaults = {"baudrate": factory.baudrate, "parity": factory.parity}
+        return {**defaults, "stopbits": factory.stopbits, **data}
 
 
 def _line_key_field(key: LineKey) -> Any:
@@ -224,9 +245,7 @@ def parse(
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "YAML"
-        raise ConfigError([(where, f"not valid YAML: {getattr(exc, 'problem', exc)}")]) from exc
+        raise ConfigError([yaml_problem(exc)]) from exc
     if not isinstance(data, dict):
         raise ConfigError([("(top)", "the file must be a mapping with a 'buses' list")])
     unset: list[tuple[str, str]] = []
@@ -238,7 +257,7 @@ def parse(
     try:
         model = ConfigModel.model_validate(data)
     except ValidationError as exc:
-        problems = [describe_error(error) for error in exc.errors()]
+        problems = [in_words(ConfigModel, error) for error in exc.errors()]
         # Check the meaning of whatever parts are well-formed too, so that a wrong type in
         # one bus does not hide an address out of range in another until it is fixed.
         salvaged = _salvage(data)
@@ -324,6 +343,8 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
         if port_problem:
             problems.append((f"{where}.port", port_problem))
         spec = spec_for(bus.protocol)
+        if bus.baudrate not in spec.baudrates:
+            problems.append((f"{where}.baudrate", baudrate_problem(spec, bus.baudrate)))
         codec = codec_for(_line(bus, ()))
         addresses: dict[str, str] = {}
         drives: list[DrivePlan] = []

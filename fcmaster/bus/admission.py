@@ -55,6 +55,12 @@ def refusal(
             reason = beyond_limits(target.plan, command.reference_pct)
             if reason:
                 return result_of(Outcome.NOT_ALLOWED, reason)
+        if command.reference_pct < 0:  # every surface refuses it first; a caller may not
+            return result_of(
+                Outcome.INVALID,
+                f"reference {command.reference_pct:g} % is not a magnitude (≥ 0): "
+                "change the direction with forward or reverse",
+            )
         try:  # NaN, or beyond what the wire carries: it would fail when sent instead
             # As a run: codecs that send the frequency only with a run (ENC) check it then.
             intent = ControlIntent(Motion.RUN, reference_pct=command.reference_pct)

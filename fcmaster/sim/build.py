@@ -73,7 +73,10 @@ def build_line(
     allowed = PROTOCOLS[line.protocol].addresses(line)
     bad = [a for a in addresses if a not in allowed]
     if bad:
-        raise UsageError(f"{line.protocol} addresses are {_span(allowed)}, not {bad}")
+        shown = ", ".join(str(a) for a in bad[:5]) + (
+            f" and {len(bad) - 5} more" if bad[5:] else ""
+        )
+        raise UsageError(f"{line.protocol} addresses are {_span(allowed)}, not {shown}")
     repeated = sorted({a for a in addresses if addresses.count(a) > 1})
     if repeated and not line.duplicate_addresses:
         raise UsageError(f"addresses {repeated} appear more than once on line {line.name}")

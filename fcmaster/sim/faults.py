@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 from fcmaster.errors import UsageError
+from fcmaster.suggest import did_you_mean
 
 _RATES: Final = ("drop", "corrupt", "noise", "late", "silent")
 _DURATIONS: Final = ("late_s", "silent_s")
@@ -96,6 +97,9 @@ class FaultPlan:
         )
 
 
+_KNOWN: Final = (*_RATES, *_DURATIONS, "noise_bytes", "silent_at", "echo", "seed")
+
+
 def parse_faults(text: str) -> FaultPlan:
     """The plan written as ``drop=0.05,corrupt=0.01,echo,silent_at=10-15`` (UsageError if not)."""
     values: dict[str, Any] = {}  # keys checked against the fields below
@@ -107,6 +111,9 @@ def parse_faults(text: str) -> FaultPlan:
         key, sep, value = (part.strip() for part in item.partition("="))
         if key == "echo":
             values["echo"] = not sep or _flag(value)
+        elif key not in _KNOWN:
+            raise UsageError(f"unknown fault {key!r}{did_you_mean(key, _KNOWN)}; known: "
+                             f"{', '.join(_KNOWN)}")  # fmt: skip
         elif not sep:
             raise UsageError(f"fault {item!r} needs a value, like {item}=0.01")
         elif key in _RATES or key in _DURATIONS:
@@ -118,9 +125,6 @@ def parse_faults(text: str) -> FaultPlan:
             if not dash:
                 raise UsageError(f"silent_at={value}: write the window as START-END seconds")
             periods.append((_number(key, start), _number(key, end)))
-        else:
-            known = ", ".join((*_RATES, *_DURATIONS, "noise_bytes", "silent_at", "echo", "seed"))
-            raise UsageError(f"unknown fault {key!r}; known: {known}")
     return FaultPlan(silent_periods=tuple(periods), **values)
 
 

@@ -23,12 +23,13 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 from typing import Any, BinaryIO, Final, TextIO
-from urllib.parse import quote, urlsplit
+from urllib.parse import quote
 
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.errors import FcmasterError, UsageError
 from fcmaster.protocol import pcapng
 from fcmaster.protocol.pcapng import Interface, LineFormat, Packet
+from fcmaster.subcommands.urls import daemon_url
 
 POLL_S: Final = 0.25
 REQUEST_TIMEOUT_S: Final = 10.0
@@ -36,9 +37,7 @@ REQUEST_TIMEOUT_S: Final = 10.0
 
 def frames_url(url: str, bus: str) -> str:
     """``http://host:8080`` → ``http://host:8080/api/v1/buses/BUS/frames``."""
-    parts = urlsplit(url if "://" in url else f"http://{url}")
-    if parts.scheme not in ("http", "https") or not parts.netloc:
-        raise UsageError(f"--url {url!r} is not like http://127.0.0.1:8080")
+    parts = daemon_url(url, ("http", "https"))
     base = f"{parts.scheme}://{parts.netloc}{parts.path.rstrip('/')}"
     return f"{base}/api/v1/buses/{quote(bus, safe='')}/frames"
 

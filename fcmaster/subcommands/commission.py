@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import sys
 from dataclasses import dataclass, replace
 from typing import Any
@@ -34,6 +35,7 @@ from fcmaster.bus.master import BusMaster, BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, with_protocol_options
 from fcmaster.bus.stats import DriveStats
 from fcmaster.clock import MonotonicClock
+from fcmaster.config_values import baudrate_problem, port_url_problem
 from fcmaster.errors import BusError, CommandError, UsageError
 from fcmaster.protocol.codec import DriveCodec, Reply
 from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, hz_to_pct, pct_to_hz
@@ -61,7 +63,12 @@ class LineOptions:
     protocol_options: OptionPairs = ()
 
     def __post_init__(self) -> None:
-        problems = spec_for(self.protocol).option_problems(self.protocol_options)
+        spec = spec_for(self.protocol)
+        problems = spec.option_problems(self.protocol_options)
+        if port_problem := port_url_problem(self.port):
+            problems.insert(0, f"--port {port_problem}")
+        if self.baudrate is not None and self.baudrate not in spec.baudrates:
+            problems.insert(0, f"--baudrate {baudrate_problem(spec, self.baudrate)}")
         if problems:
             raise UsageError("; ".join(problems))
 
@@ -128,10 +135,11 @@ async def scan(options: LineOptions, addresses: list[int] | None, *, as_json: bo
     """
     found: list[dict[str, Any]] = []
     show_progress = sys.stderr.isatty()
-    async with _Session(options.plan()) as session:
-        addresses = list(session.codec.addresses) if addresses is None else addresses
-        for address in addresses:
-            _check_address(session.codec, address)
+    session = _Session(options.plan())
+    addresses = list(session.codec.addresses) if addresses is None else addresses
+    for address in addresses:  # before the port opens: a wrong address is the user's
+        _check_address(session.codec, address)
+    async with session:
         done = 0
         try:
             for done, address in enumerate(addresses, 1):
@@ -146,7 +154,7 @@ async def scan(options: LineOptions, addresses: list[int] | None, *, as_json: bo
             if show_progress:
                 print(file=sys.stderr)
             print(f"interrupted at {done} of {len(addresses)} addresses", file=sys.stderr)
-            _print_found(found, options, len(addresses), as_json=as_json)
+            _print_found(found, options, done, as_json=as_json, interrupted=True)
             raise
         if show_progress:
             print(file=sys.stderr)
@@ -155,7 +163,12 @@ async def scan(options: LineOptions, addresses: list[int] | None, *, as_json: bo
 
 
 def _print_found(
-    found: list[dict[str, Any]], options: LineOptions, tried: int, *, as_json: bool
+    found: list[dict[str, Any]],
+    options: LineOptions,
+    tried: int,
+    *,
+    as_json: bool,
+    interrupted: bool = False,
 ) -> None:
     if as_json:
         print(json.dumps(found, indent=2), flush=True)
@@ -163,9 +176,26 @@ def _print_found(
         for entry in found:
             flags = ", ".join(k for k in ("running", "fault", "warning") if entry[k]) or "stopped"
             print(f"{entry['address']:>4}  status 0x{entry['status_word']:04X}  {flags}")
+    elif interrupted:
+        print(f"no drive answered on {options.port} before the interrupt")
     else:
         print(f"no drive answered on {options.port} ({tried} addresses tried)")
+        _print_hint(options)
     sys.stdout.flush()
+
+
+def _print_hint(options: LineOptions) -> None:
+    """What to try after a scan that found nothing: other settings, or the doctor."""
+    plan = options.plan()
+    spec = spec_for(options.protocol)
+    others = [str(rate) for rate in spec.baudrates if rate != plan.baudrate]
+    print(
+        f"  tried {options.protocol} at {plan.baudrate} {plan.databits}{plan.parity}"
+        f"{plan.stopbits}; the drives may be set otherwise: try --baudrate "
+        f"{' / '.join(others)}, --parity {' / '.join(spec.parities)}, or let "
+        f"`fcmaster doctor --port {options.port}` find the settings",
+        file=sys.stderr,
+    )
 
 
 def _progress(done: int, total: int, address: int, found: int) -> None:
@@ -212,16 +242,24 @@ async def status(options: LineOptions, address: int, *, as_json: bool) -> int:
     if as_json:
         print(json.dumps(out, indent=2))
     else:
-        for key, value in out.items():
-            if key == "values":
-                for name, v in value.items():
-                    print(f"  {name:<12}{v['value']} {v['unit']}")
-            elif key in ("alarms", "warnings"):
-                texts = ", ".join(f"{c['text']} ({c['code']})" for c in value) or "none"
-                print(f"{key:<20}{texts}")
-            else:
-                print(f"{key:<20}{value}")
+        _print_state(out)
     return 0
+
+
+def _print_state(out: dict[str, Any]) -> None:
+    """A drive state as a two-column table, every key apart from its value."""
+    width = max(len(key) for key in out) + 2
+    for key, value in out.items():
+        if key == "values":
+            print("values")
+            for name, v in value.items():
+                label = f"{name} {v['name']}" if v.get("name") else name
+                print(f"  {label:<{width - 2}}{v['value']} {v['unit']}".rstrip())
+        elif key in ("alarms", "warnings"):
+            texts = ", ".join(f"{c['text']} ({c['code']})" for c in value) or "none"
+            print(f"{key:<{width}}{texts}")
+        else:
+            print(f"{key:<{width}}{value}")
 
 
 async def access(
@@ -235,14 +273,15 @@ async def access(
     as_json: bool = False,
 ) -> int:
     """`read` (value None) or `write` one parameter."""
-    async with _Session(options.plan()) as session:
-        codec = session.codec
-        _check_address(codec, address)
-        key = codec.parameter(parameter)
-        if value is None:
-            exchanges = codec.read(address, key, index, None)
-        else:
-            exchanges = codec.write(address, key, index, _number(value), None, persist=persist)
+    session = _Session(options.plan())
+    codec = session.codec
+    _check_address(codec, address)  # the exchanges are built before the port opens: a
+    key = codec.parameter(parameter)  # mistake in them is the user's, not the line's
+    if value is None:
+        exchanges = codec.read(address, key, index, None)
+    else:
+        exchanges = codec.write(address, key, index, _number(value), None, persist=persist)
+    async with session:
         # Several exchanges (a Mitsubishi parameter: the page, then the access): the first
         # refusal or silence ends it; the last reply holds the value.
         reply: Reply | None = None
@@ -306,6 +345,7 @@ async def control(
     if not verb.is_control:
         raise UsageError(f"{action} is not a control action; use read or write")
     given = "--frequency" if frequency_hz is not None else "--reference"
+    _check_magnitudes(frequency_hz, reference_pct, nominal_frequency_hz, max_frequency_hz)
     if (frequency_hz is not None or reference_pct is not None) and verb not in _TAKES_REFERENCE:
         takes = ", ".join(a.value.replace("_", "-") for a in _TAKES_REFERENCE)
         raise UsageError(f"{action} takes no {given} (only {takes} do)")
@@ -348,6 +388,36 @@ async def control(
         exc.args = (f"{action}: {exc}",)  # the same error, its other fields kept
         raise
     return 1  # pragma: no cover - raise_for_outcome raises for every other outcome
+
+
+def _check_magnitudes(
+    frequency_hz: float | None,
+    reference_pct: float | None,
+    nominal_frequency_hz: float,
+    max_frequency_hz: float | None,
+) -> None:
+    """UsageError, before the port is opened, for a speed that is not a magnitude.
+
+    Frequencies and references are magnitudes, as on every surface of the daemon: the
+    direction changes only with forward or reverse, so ``--frequency -5`` must never run a
+    drive backwards at 5 Hz.
+    """
+    for option, value in (("--nominal-frequency", nominal_frequency_hz),
+                          ("--max-frequency", max_frequency_hz)):  # fmt: skip
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise UsageError(f"{option} {value:g} is not a positive number of Hz")
+    for option, value, unit in (("--frequency", frequency_hz, "Hz"),
+                                ("--reference", reference_pct, "%")):  # fmt: skip
+        if value is None:
+            continue
+        if not math.isfinite(value):
+            raise UsageError(f"{option} {value:g} is not a number of {unit}")
+        if value < 0:
+            hz = value if unit == "Hz" else pct_to_hz(value, nominal_frequency_hz)
+            raise UsageError(
+                f"{option} {value:g} ({hz:g} Hz) is a magnitude and must be 0 or more: "
+                "change the direction with the forward or reverse action"
+            )
 
 
 class _OneRound:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import errno
+import os
 import socket
 from pathlib import Path
 
@@ -74,6 +75,13 @@ def check(path: Path, *, machine: Machine | None = None) -> int:
             )
     for unstable in unstable_ports(config.lines, machine):
         print(f"  warning: {unstable.message()}")
+    for b, plan in enumerate(config.lines):
+        # Not an error: a USB adapter may be plugged in later, and `run` waits for it.
+        if "://" not in plan.port and not os.path.exists(plan.port):
+            print(
+                f"  warning: buses[{b}].port: {plan.port} does not exist (yet); {plan.name} "
+                "stays down until it appears (see `fcmaster ports` for this machine's adapters)"
+            )
     return 0
 
 
@@ -108,13 +116,20 @@ def check_listen(listen: str, *, overridden: bool) -> None:
         socket.create_server((host, port), family=family).close()
     except OSError as exc:
         where = "--http-listen" if overridden else "http.listen"
-        taken = exc.errno == errno.EADDRINUSE
-        reason = "it is taken (another fcmaster?)" if taken else (exc.strerror or str(exc))
-        other = port + 1 if 0 < port < 65535 else 8081
-        raise UsageError(
-            f"cannot serve HTTP at {host}:{port} ({where}): {reason}; "
-            f"pass --http-listen {host}:{other} to use another port"
-        ) from exc
+        if exc.errno == errno.EADDRINUSE:
+            other = port + 1 if 0 < port < 65535 else 8081
+            advice = f"it is taken (another fcmaster?); pass --http-listen {host}:{other}"
+            raise UsageError(f"cannot serve HTTP at {host}:{port} ({where}): {advice}") from exc
+        if isinstance(exc, socket.gaierror) or (exc.errno or 0) < 0:  # getaddrinfo: EAI_*
+            advice = f"{host!r} is not an address of this machine nor a name that resolves"
+        elif exc.errno == errno.EADDRNOTAVAIL:
+            advice = (
+                f"this machine has no address {host}; use one of its own, 127.0.0.1 for "
+                "this machine only, or 0.0.0.0 for every interface"
+            )
+        else:
+            advice = os.strerror(exc.errno) if exc.errno else str(exc)
+        raise UsageError(f"cannot serve HTTP at {host}:{port} ({where}): {advice}") from exc
 
 
 async def run(path: Path, *, demo: bool, http_listen: str | None = None) -> int:

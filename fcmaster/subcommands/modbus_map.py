@@ -11,7 +11,8 @@ from fcmaster.adapters.modbus_map import ACTIONS, register_map
 
 def run(path: Path, *, as_json: bool) -> int:
     """Print the map of ``path``'s drives (JSON: one object per value)."""
-    config = config_module.load(path)
+    # The map needs the buses and the modbus section, never the HTTP or MQTT secrets.
+    config = config_module.load(path, buses_only=True)
     mapping = register_map(config.lines, config.modbus_units())
     if as_json:
         print(json.dumps(mapping.entries(), indent=2, ensure_ascii=False))

@@ -17,13 +17,14 @@ import sys
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any, TextIO
-from urllib.parse import urlsplit, urlunsplit
+from urllib.parse import urlunsplit
 
 from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus, WebSocketException
 
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.errors import FcmasterError, UsageError
+from fcmaster.subcommands.urls import daemon_url
 
 _HOME, _CLEAR_LINE, _CLEAR_BELOW = "\x1b[H", "\x1b[K", "\x1b[J"
 _RED, _YELLOW, _GREEN, _DIM, _BOLD, _RESET = (
@@ -38,10 +39,8 @@ _RED, _YELLOW, _GREEN, _DIM, _BOLD, _RESET = (
 
 def stream_url(url: str) -> str:
     """``http://host:8080`` (or ws://…) → ``ws://host:8080/api/v1/stream``."""
-    parts = urlsplit(url if "://" in url else f"http://{url}")
-    scheme = {"http": "ws", "https": "wss", "ws": "ws", "wss": "wss"}.get(parts.scheme)
-    if scheme is None or not parts.netloc:
-        raise UsageError(f"--url {url!r} is not like http://127.0.0.1:8080")
+    parts = daemon_url(url, ("http", "https", "ws", "wss"))
+    scheme = {"http": "ws", "https": "wss", "ws": "ws", "wss": "wss"}[parts.scheme]
     path = parts.path.rstrip("/")
     if not path.endswith("/api/v1/stream"):
         path += "/api/v1/stream"

@@ -68,13 +68,14 @@ def run(
     if not adapters:
         print("no serial adapters found", file=out)
     for adapter in adapters:
-        _print_adapter(adapter, users[adapter.device], out)
+        _print_adapter(adapter, users[adapter.device] if config is not None else None, out)
     for entry in missing:
         print(f"bus {entry['bus']}: {entry['port']} is on no adapter of this machine", file=out)
     return 0
 
 
-def _print_adapter(adapter: Adapter, used_by: list[str], out: TextIO) -> None:
+def _print_adapter(adapter: Adapter, used_by: list[str] | None, out: TextIO) -> None:
+    """One adapter; ``used_by``: the buses of the config at it (None: no config given)."""
     latency = (
         "no latency timer" if adapter.latency_ms is None else f"latency {adapter.latency_ms} ms"
     )
@@ -85,7 +86,8 @@ def _print_adapter(adapter: Adapter, used_by: list[str], out: TextIO) -> None:
     for kind, name in (("by-id", adapter.by_id), ("by-path", adapter.by_path)):
         if name is not None:
             print(f"  {kind:<8}{name}", file=out)
-    print(f"  {used}", file=out)
+    if used_by is not None:
+        print(f"  {used}", file=out)
 
 
 def unstable_ports(

@@ -20,8 +20,10 @@ from typing import Final, TextIO
 
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import load
+from fcmaster.config_values import baudrate_problem
 from fcmaster.errors import UsageError
 from fcmaster.protocol import pcapng
+from fcmaster.protocol.registry import spec_for
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line, parse_faults
 from fcmaster.sim.build import simulated_keys
 from fcmaster.sim.line import SimLine
@@ -51,12 +53,16 @@ async def run(args: argparse.Namespace) -> int:
     if args.bus:
         raise UsageError("--bus selects buses of a --config file; give --config too")
     delay_ms = args.response_delay_ms
+    spec = spec_for(args.protocol)
+    factory = spec.factory  # as the drives leave the factory, like every other tool's default
+    if args.baudrate is not None and args.baudrate not in spec.baudrates:
+        raise UsageError(f"--baudrate {baudrate_problem(spec, args.baudrate)}")
     line = LineSettings(
         name=args.name,
         protocol=args.protocol,
-        baudrate=args.baudrate,
-        parity=args.parity,
-        stopbits=args.stopbits,
+        baudrate=args.baudrate or factory.baudrate,
+        parity=args.parity or factory.parity,
+        stopbits=args.stopbits or factory.stopbits,
         faults=parse_faults(args.faults),
         protocol_options=simulated_keys(args.protocol, args),  # the options the drives take
         adapter_latency_ms=args.adapter_latency_ms,
@@ -158,6 +164,9 @@ async def _serve_lines(
     stop: asyncio.Event | None,
 ) -> int:
     out = out or sys.stdout
+    for name, _, link in lines:
+        if link is not None and not Path(link).parent.is_dir():  # the user's, not the pty's
+            raise UsageError(f"{name}: cannot link {link}: {Path(link).parent} is no directory")
     loop = asyncio.get_running_loop()
     handled: list[signal.Signals] = []
     if stop is None:

@@ -35,6 +35,8 @@ def open_error(port: str, exc: BaseException) -> str:
     """``cannot open PORT: REASON (FIX)`` for ``exc``, raised while opening ``port``."""
     code = _errno(exc)
     reason = os.strerror(code).lower() if code is not None else str(exc)
+    if code is not None and code < 0:  # getaddrinfo's codes (EAI_*), not the system's
+        return f"cannot open {port}: the host name or address cannot be resolved"
     hints = _NETWORK_HINTS if "://" in port else _DEVICE_HINTS
     hint = hints.get(code) if code is not None else None
     return f"cannot open {port}: {reason}" + (f" ({hint})" if hint else "")

@@ -11,12 +11,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import itertools
+import json
 import signal
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 import serial
 
 from fcmaster.protocol import pcapng
@@ -33,8 +36,8 @@ buses:
     port: {north}
     baudrate: 38400
     drives:
-      - {{name: pump-1, address: 1, nominal_frequency_hz: 50}}
-      - {{name: pump-2, address: 2, nominal_frequency_hz: 50}}
+      - {{name: pump-1, address: 1, nominal_frequency_hz: 50, control: {control}}}
+      - {{name: pump-2, address: 2, nominal_frequency_hz: 50, control: {control}}}
     simulation:
       drives:
         1: {{running_hz: 30}}
@@ -56,10 +59,10 @@ def exchanges(capture: pcapng.Capture) -> list[tuple[bytes, bytes]]:
     return [(request, bytes(reply)) for request, reply in pairs if reply]
 
 
-async def _capture_a_running_line(tmp_path: Path) -> Path:
+async def _capture_a_running_line(tmp_path: Path, control: str = "monitor") -> Path:
     north, port = tmp_path / "ttyNORTH", free_port()
     config = tmp_path / "plant.yaml"
-    config.write_text(CONFIG.format(north=north, port=port, viewer=VIEWER))
+    config.write_text(CONFIG.format(north=north, port=port, viewer=VIEWER, control=control))
     output = tmp_path / "north.pcapng"
     url = f"http://127.0.0.1:{port}"
     async with child("sim", "--config", str(config), log=tmp_path / "sim.log") as sim:
@@ -190,3 +193,36 @@ async def test_replay_refuses_a_file_that_is_not_a_capture(tmp_path: Path) -> No
     assert "not a pcapng file" in log.read_text()
     with contextlib.suppress(FileNotFoundError):
         assert not (tmp_path / "ttyREPLAY").exists()
+
+
+async def _tool(*args: str) -> tuple[int, str, str]:
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "fcmaster", *args,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    out, err = await asyncio.wait_for(process.communicate(), START_S)
+    assert process.returncode is not None
+    return process.returncode, out.decode(), err.decode()
+
+
+async def test_the_commissioning_tools_get_what_a_daemons_capture_implies(tmp_path: Path) -> None:
+    # Captured from a daemon commanding its drives (control: bus): the tools send control
+    # word 0, and scan asks no parameter at all; neither is in the capture byte for byte.
+    output = await _capture_a_running_line(tmp_path, control="bus")
+    link = tmp_path / "ttyREPLAY"
+    line = ("--port", str(link), "--baudrate", "38400")
+    replay_log = tmp_path / "replay.log"
+    async with child("sim", "--replay", str(output), "--link", str(link), log=replay_log) as sim:
+        assert (await sim.readline()).split() == ["north", str(link)]
+        code, out, err = await _tool("scan", *line, "--addresses", "1-3", "--json")
+        assert code == 0, err
+        found = {entry["address"]: entry for entry in json.loads(out)}
+        assert sorted(found) == [1, 2]  # 3 was never on the line
+        assert found[1]["running"]
+        assert not found[2]["running"]
+        code, out, err = await _tool("status", *line, "--address", "1", "--json")
+        assert code == 0, err
+        state = json.loads(out)
+        assert state["running"]
+        assert state["output_frequency_hz"] == pytest.approx(30.0, abs=0.5)
+        assert state["values"]["16-14"]["unit"] == "A"

@@ -6,6 +6,7 @@ from typing import Final
 
 from fcmaster.protocol.danfoss_fc.framer import FcFramer
 from fcmaster.sim.danfoss_fc.drive import FcSimDrive
+from fcmaster.sim.danfoss_fc.replay import RULES
 from fcmaster.sim.line import SimDrive
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.sim.simulator import SimProtocol
@@ -15,4 +16,4 @@ def _drive(address: int, settings: DriveSettings, line: LineSettings, now: float
     return FcSimDrive(address, settings, now=now, line=line)
 
 
-SIMULATOR: Final = SimProtocol(lambda _: FcFramer(), _drive)
+SIMULATOR: Final = SimProtocol(lambda _: FcFramer(), _drive, replay=RULES)

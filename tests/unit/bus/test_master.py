@@ -406,6 +406,23 @@ async def test_reference_beyond_max_frequency_is_refused_and_never_sent() -> Non
     assert {t.pcd2 for _, t in b.requests(1)} == {0}
 
 
+async def test_a_negative_reference_is_invalid_and_never_sent() -> None:
+    # Direction changes only by forward or reverse: -5 Hz within the limits is no reverse run.
+    b = bench(DrivePlan(name="a", address=1, control=True, max_frequency_hz=50.0))
+    async with b.master:
+        await b.clock.run_until(T0 + 0.1)
+        drive = orders(b.master, "a")
+        start = await b.complete(b.submit(drive.start(frequency_hz=-5.0)))
+        reference = await b.complete(b.submit(drive.set_reference(reference_pct=-20.0)))
+        await b.clock.run_for(0.1)
+    assert start.outcome is Outcome.INVALID
+    assert reference.outcome is Outcome.INVALID
+    assert "forward or reverse" in start.reason
+    assert set(b.words(1)[1:]) == {STOP_WORD}
+    assert {t.pcd2 for _, t in b.requests(1)} == {0}
+    assert not b.drives[1].running
+
+
 async def test_trip_turns_the_intent_into_a_stop_so_a_reset_does_not_restart() -> None:
     b = bench(A, fc=[FcDrive(1, running=True, output_pct=50.0)])
     async with b.master:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from fcmaster.bus.codecs import codec_for
@@ -13,8 +15,10 @@ from fcmaster.protocol import pcapng
 from fcmaster.protocol.framing import Frame
 from fcmaster.protocol.pcapng import Capture, Interface, LineFormat, Packet
 from fcmaster.sim import SimTransport
+from fcmaster.sim.danfoss_fc.replay import RULES as FC_RULES
 from fcmaster.sim.replay import KnownRequestFramer, ReplayDrive, replay_lines, replay_sim_line
 from fcmaster.sim.service import sim_line
+from fcmaster.state import FleetState
 from tests.fakes import VirtualClock
 
 IFACE = Interface(link_type=147, name="north", description="danfoss-fc 9600 8N1", speed=9600)
@@ -143,3 +147,91 @@ async def test_a_master_on_the_replay_gets_the_replies_the_captured_master_got(
     assert after[:50] == before[:50]  # the same requests, answered with the same bytes
     assert second.stats.replies >= 0.9 * first.stats.replies
     assert second.stats.timeouts == first.stats.timeouts == 0
+
+
+def _mid_run_capture(master: BusMaster, after_s: float) -> Capture:
+    """The master's frames from ``after_s`` on: a capture begun on a line already running."""
+    whole = _capture_of(master)
+    start = whole.packets[0].timestamp_us + round(after_s * 1e6)
+    later = [p for p in whole.packets if p.timestamp_us >= start]
+    while later and later[0].direction == pcapng.INBOUND:
+        later.pop(0)  # a reply whose request came before the capture began
+    return replace(whole, packets=later)
+
+
+async def _capture_of_bus_drives(protocol: str = "danfoss-fc") -> tuple[LinePlan, Capture]:
+    """A capture begun mid-run on a master commanding two drives, the first one running."""
+    first_address = codec_for(_plan(protocol)).addresses.start + 1
+    addresses = (first_address, first_address + 1)
+    plan = replace(
+        _plan(protocol),
+        drives=tuple(
+            DrivePlan(name=f"d{i}", address=a, control=True) for i, a in enumerate(addresses, 1)
+        ),
+    )
+    clock = VirtualClock()
+    line = sim_line(plan, {"drives": {first_address: {"running_hz": 30}}}, clock=clock)
+    first = BusMaster(plan, codec=codec_for(plan), transport=SimTransport(line, clock), clock=clock)
+    async with first:
+        await clock.run_for(3.0)
+    return plan, _mid_run_capture(first, 1.5)
+
+
+async def _states_on_replay(plan: LinePlan, capture: Capture) -> FleetState:
+    (replayed,) = replay_lines(capture)
+    clock = VirtualClock()
+    replay = replay_sim_line(replayed, clock=clock)
+    fleet = FleetState((plan,), emit=lambda event: None, clock=clock)
+    master = BusMaster(
+        plan, codec=codec_for(plan), transport=SimTransport(replay, clock), clock=clock,
+        observer=fleet,
+    )  # fmt: skip
+    async with master:
+        await clock.run_for(2.0)
+    return fleet
+
+
+@pytest.mark.parametrize("control", [True, False])
+@pytest.mark.parametrize("protocol", sorted(pcapng.LINK_TYPES))
+async def test_a_daemon_on_the_replay_sees_the_captured_drives_whatever_it_commands(
+    protocol: str, control: bool
+) -> None:
+    # Captured mid-run from a master commanding its drives: a master starting afresh (FC:
+    # first polls with the control word marked not valid) or a monitor-only one asks the
+    # same questions with other control words, and gets the captured drives' answers.
+    plan, capture = await _capture_of_bus_drives(protocol)
+    drives = tuple(replace(d, control=control) for d in plan.drives)
+    fleet = await _states_on_replay(replace(plan, drives=drives), capture)
+    one, two = fleet.get("north", "d1"), fleet.get("north", "d2")
+    assert one is not None
+    assert two is not None
+    assert one.online
+    assert two.online
+    assert one.running
+    assert not two.running
+    assert one.output_frequency_hz == pytest.approx(30.0, abs=0.5)
+
+
+async def test_a_commissioning_poll_gets_the_drives_latest_status_and_unknowns_stay_silent() -> (
+    None
+):
+    plan, capture = await _capture_of_bus_drives()
+    (replayed,) = replay_lines(capture)
+    drive = ReplayDrive(replayed.answers, rules=FC_RULES, sequence=replayed.sequence)
+    codec = codec_for(plan)
+    one, two = (drive.address for drive in plan.drives)
+    for address, running in ((one, True), (two, False)):
+        poll = codec.poll(address, None, None)  # a scan's: control word 0, no parameter
+        assert poll.request not in replayed.answers
+        reply = drive.handle(poll.request, 0.0)
+        assert reply is not None
+        status = codec.parse(poll, reply).status
+        assert status is not None
+        assert status.running is running
+        read = codec.read(address, codec.parameter("16-14"), 0, None)[0]  # polled: answered
+        value = codec.parse(read, drive.handle(read.request, 0.0) or b"").value
+        assert value is not None
+        assert value.unit == "A"
+    never_read = codec.read(one, codec.parameter("1-20"), 0, None)[0]
+    assert drive.handle(never_read.request, 0.0) is None  # a question never asked
+    assert drive.handle(codec.poll(9, None, None).request, 0.0) is None  # a drive not there
