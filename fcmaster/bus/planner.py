@@ -72,11 +72,11 @@ from __future__ import annotations
 import dataclasses
 
 from fcmaster.bus import admission
+from fcmaster.bus.adoption import executed_control, take_over
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.confirm import LOCAL, needs_confirmation, note_ramp, ramp_keys
 from fcmaster.bus.confirming import Confirmations
 from fcmaster.bus.intents import (
-    adopted,
     apply,
     current,
     forget,
@@ -152,6 +152,7 @@ class Planner:
         self._in_flight: Pending | None = None  # the command whose step is on the wire
         self._confirming = Confirmations()  # acknowledged, waiting for the status to show it
         self._ramp_keys = ramp_keys(codec)  # read from each bus-controlled drive once online
+        self._executed = executed_control(codec)  # read at adoption of a drive off its reference
         self._peeked: Step | None = None  # the step peek chose, until it is committed
 
     # -- commands in -------------------------------------------------------------------
@@ -411,7 +412,7 @@ class Planner:
         self.rotation.heard(slot, kind, now, report)
         learn(slot, reply)
         if slot.plan.control and slot.intent is None:
-            slot.intent = adopted(slot)
+            take_over(slot, reply, self._executed)
         keys = self._ramp_keys
         if keys is not None and slot.plan.control:
             if not slot.ramps_asked:
