@@ -168,8 +168,8 @@ async def test_a_restart_never_starts_a_drive_ramping_down_after_a_stop(tmp_path
         assert [hex(w) for w, _ in words if runs(w)] == [], story
         assert not states[f"pump-{a}"]["running"]
     for a in RUNNING:
-        words = [w for address, w, _ in after if address == a]
-        assert words, story
-        assert [hex(w) for w in words if not runs(w)] == [], story
+        told = [w for address, w, _ in after if address == a]
+        assert told, story
+        assert [hex(w) for w in told if not runs(w)] == [], story
         assert abs(output(drives[a], clock) - 40.0) < 0.01
         assert states[f"pump-{a}"]["running"]
