@@ -3,7 +3,7 @@
 # shows them). README.md "Running with Docker" has the whole story.
 #
 #   docker build -t fcmaster .
-#   docker run -d --name fcmaster --restart unless-stopped --read-only \
+#   docker run -d --name fcmaster --restart unless-stopped --read-only --stop-timeout 75 \
 #       --device /dev/ttyUSB0 \
 #       -v "$PWD/plant.yaml:/etc/fcmaster/config.yaml:ro" \
 #       -p 127.0.0.1:8080:8080 \
@@ -35,7 +35,8 @@ ENV PATH=/opt/fcmaster/bin:$PATH \
     PYTHONDONTWRITEBYTECODE=1
 USER fcmaster
 EXPOSE 8080
-# `docker stop` sends SIGTERM: the daemon shuts down in order (on_shutdown) and exits 0.
+# `docker stop` sends SIGTERM: the daemon shuts down in order (on_shutdown) and exits 0,
+# waiting for the drives' stops up to shutdown_timeout_s (60 s): --stop-timeout 75.
 STOPSIGNAL SIGTERM
 ENTRYPOINT ["fcmaster"]
 CMD ["run"]
