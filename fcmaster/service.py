@@ -43,6 +43,7 @@ from typing import Any
 import structlog
 
 from fcmaster.adapters.gateway import LineInfo
+from fcmaster.bus.audit import audit, command_values
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.confirm import stop_known, stop_time
@@ -186,16 +187,19 @@ class Service:
         except KeyError:
             return CommandResult(outcome=Outcome.INVALID, reason=f"no drive called {drive!r}")
         if self._stopping.is_set():
-            log.info(
-                "command.completed",
-                actor=command.actor or "-",
-                bus=master.plan.name,
+            result = CommandResult(outcome=Outcome.CANCELLED, reason=SHUTTING_DOWN)
+            plan = self.drive_plan(drive)
+            nominal = None if plan is None else plan.nominal_frequency_hz
+            audit(
+                log,
+                actor=command.actor,
                 drive=drive,
-                command=command.action.value,
-                outcome=Outcome.CANCELLED.value,
-                reason=SHUTTING_DOWN,
+                action=command.action.value,
+                values=command_values(command, nominal),
+                result=result,
+                bus=master.plan.name,
             )
-            return CommandResult(outcome=Outcome.CANCELLED, reason=SHUTTING_DOWN)
+            return result
         self._running_commands += 1
         self._no_commands.clear()
         try:

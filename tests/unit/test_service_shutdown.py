@@ -15,6 +15,7 @@ from typing import Any
 
 import structlog.testing
 
+from fcmaster.bus.commands import Action, Command, Outcome
 from fcmaster.config import parse
 from fcmaster.protocol.danfoss_fc import ControlWord
 from fcmaster.service import Service
@@ -179,3 +180,36 @@ async def test_the_shutdown_waits_no_longer_than_shutdown_timeout_s() -> None:
     assert b.stop_at is not None
     assert clock.now() < b.stop_at  # 30 s to stand; the bound was 12 s
     assert 12.0 <= clock.now() - (T0 + 1.0) < 13.0  # stopped at T0 + 1 s (virtual time)
+
+
+async def test_a_command_arriving_during_the_shutdown_is_audited_cancelled_with_its_values() -> (
+    None
+):
+    clock = VirtualClock(T0)
+    drives = (FcDrive(1, running=True, output_pct=50.0), FcDrive(2, running=True, output_pct=50.0))
+    service = Service(
+        parse(CONFIG),
+        clock=clock,
+        transport_factory=lambda _: ScriptedTransport(clock, FcLine(*drives), delay_s=DELAY_S),
+    )
+    task = asyncio.ensure_future(service.run(install_signals=False))
+    await clock.run_until(T0 + 1.0)
+    with structlog.testing.capture_logs() as logs:
+        service.stop()
+        late = Command(action=Action.START, reference_pct=40.0, actor="ops")
+        result = await service.execute("a", late)
+        await clock.complete(task, within=60.0)
+    assert (result.outcome, result.reason) == (Outcome.CANCELLED, "fcmaster is shutting down")
+    (audit,) = [e for e in logs if e["event"] == "command.completed" and e["actor"] == "ops"]
+    assert audit == {
+        "event": "command.completed",
+        "log_level": "info",
+        "actor": "ops",
+        "drive": "a",
+        "command": "start",
+        "reference_pct": 40.0,
+        "frequency_hz": 20.0,
+        "outcome": "cancelled",
+        "reason": "fcmaster is shutting down",
+        "bus": "line1",
+    }
