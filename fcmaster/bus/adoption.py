@@ -3,11 +3,20 @@
 A drive found stopped is told to stay stopped, one running at its reference to keep running
 at its present output. A drive found running *off* its reference is ramping: towards a new
 speed, or down after a stop it was given before the master (re)started, still reporting
-itself running until its output reaches 0 Hz. Its status alone cannot tell these apart, so
-where the protocol lets a poll read what the drive executes (FC: 16-00, the control word it
-obeys) that is read first, and a drive executing a stop is adopted with that stop: a gateway
-killed during an operator's stop never commands the motor back to speed. A drive executing
-motion, or on a protocol with nothing to read, is adopted running at its present output.
+itself running until its output reaches 0 Hz. Its status alone cannot tell these apart.
+
+Where a poll can read what the drive executes (FC: 16-00, the control word it obeys) that
+is read first, and a drive executing a stop is adopted with that stop: a gateway killed
+during an operator's stop never commands the motor back to speed; one executing motion is
+adopted running at its present output.
+
+Where nothing tells (Mitsubishi, ENC), a drive whose output is falling is not adopted
+until it stands (a stop) or holds its speed (running there): until then a command that
+changes only part of its state (a reference, a direction) cannot be built on it and is not
+sent, so it cannot start a drive that was stopping. On these protocols the idle poll never
+commands, so an adopted intent is only the master's note of what the drive does: it follows
+the drive (a drive adopted running that then stands is noted stopped) until a command
+replaces it, so a reference sent later never starts a drive that stopped meanwhile.
 
 Pure functions of the slot and the reply, like :mod:`~fcmaster.bus.intents`.
 """
@@ -20,11 +29,27 @@ from fcmaster.bus.intents import adopted
 from fcmaster.bus.steps import DriveSlot
 from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import DriveCodec, ParameterKey, Reply
-from fcmaster.protocol.drive import Motion
+from fcmaster.protocol.drive import ControlIntent, Motion
 from fcmaster.protocol.registry import spec_for
 
 # The parameter a poll reads for what a drive executes, and its value → the stop it is.
 Executed = tuple[ParameterKey, Callable[[int], Motion | None]]
+
+
+class Adoption:
+    """How one line's drives are taken over (see the module docstring)."""
+
+    def __init__(self, codec: DriveCodec) -> None:
+        """The rules for drives spoken to through ``codec``."""
+        self.executed = executed_control(codec)
+        address = next(iter(codec.addresses))
+        # Where polls never command, an adopted intent follows the drive (see above).
+        self.follows = not codec.poll(address, ControlIntent(), None).carries_control
+
+    def heard(self, slot: DriveSlot, reply: Reply) -> None:
+        """A reply from the bus-controlled ``slot``: adopt it, or follow it, where due."""
+        if slot.intent is None or (self.follows and slot.intent is slot.adopted):
+            take_over(slot, reply, self.executed)
 
 
 def executed_control(codec: DriveCodec) -> Executed | None:
@@ -39,7 +64,7 @@ def executed_control(codec: DriveCodec) -> Executed | None:
 
 
 def take_over(slot: DriveSlot, reply: Reply, executed: Executed | None) -> None:
-    """Adopt the not yet commanded ``slot`` from ``reply`` once its state is known enough."""
+    """Adopt ``slot`` from ``reply`` once its state is known enough (None until then)."""
     if executed is not None:
         key, stopping = executed
         value = reply.value
@@ -48,4 +73,19 @@ def take_over(slot: DriveSlot, reply: Reply, executed: Executed | None) -> None:
         elif slot.running and slot.at_reference is False and not slot.executed_asked:
             slot.executed_asked = True
             slot.urgent_reads.appendleft(key)  # the next poll asks it, before anything else
-    slot.intent = adopted(slot)
+    intent = adopted(slot)
+    if (
+        executed is None
+        and intent is not None
+        and intent.motion is Motion.RUN
+        and slot.output_falling
+    ):
+        intent = None  # ramping down: stopping, or slowing to a new speed; not yet known
+    slot.intent = slot.adopted = intent
+
+
+def not_adopted(slot: DriveSlot) -> str:
+    """Why ``slot``'s state is not known well enough to build a command on it, in words."""
+    if slot.running and slot.output_falling:
+        return "running with its output falling (stopping, or slowing to a new speed)"
+    return "running, but no output reported"

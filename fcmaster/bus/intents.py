@@ -17,6 +17,7 @@ from fcmaster.protocol.drive import ControlIntent, Motion, hz_to_pct
 
 STOPPING = (Motion.STOP, Motion.COAST, Motion.QUICK_STOP)
 REFERENCE_LIMIT_PCT = 199.99  # the most a reference can say (FC: 0x7FFF); adoption stays below
+FALLING_HZ = 0.005  # an output lower than the one read before by more than this is falling
 # Actions that change only part of the commanded state, so the rest must be known first
 # (so does a start that keeps the present reference).
 RELATIVE_ACTIONS = frozenset((Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE, Action.RESET))
@@ -50,6 +51,8 @@ def learn(slot: DriveSlot, reply: Reply) -> None:
             slot.reverse = status.reverse
     output = reply.output_frequency_hz
     if output is not None:
+        before = slot.output_hz
+        slot.output_falling = before is not None and abs(output) < before - FALLING_HZ
         slot.output_hz = abs(output)
         if output and status is None:
             slot.reverse = output < 0
@@ -58,7 +61,7 @@ def learn(slot: DriveSlot, reply: Reply) -> None:
 def _unlearn(slot: DriveSlot) -> None:
     """Drop what the drive was reported doing, so it is learned anew before adoption."""
     slot.running = slot.output_hz = slot.at_reference = slot.executed = None
-    slot.executed_asked = slot.executed_known = False
+    slot.executed_asked = slot.executed_known = slot.output_falling = False
 
 
 def forget(slot: DriveSlot) -> None:

@@ -1,10 +1,13 @@
 """A master restarted while its drives ramp: adoption takes over what each drive is doing.
 
-Two BusMasters, one after the other, on the same simulated FC line in virtual time: the
-first starts four drives and stops two of them on a long ramp (3-42 = 10 s), then vanishes
-mid-ramp as a killed gateway does (no shutdown stop). The second adopts the line. Every
-control word it puts on the wire is decoded: the drives ramping down keep getting stop words
-and reach standstill, the ones at speed keep getting run words at their speed.
+Two BusMasters, one after the other, on the same simulated line in virtual time: the first
+starts the drives and stops some of them on a long ramp, then vanishes mid-ramp as a killed
+gateway does (no shutdown stop). The second adopts the line.
+
+FC: every control word the second master puts on the wire is decoded: the drives ramping
+down keep getting stop words and reach standstill, the ones at speed keep getting run words
+at their speed. Mitsubishi and ENC, whose polls never command: a command that changes only
+a drive's reference, sent while the drive ramps down or once it stands, never starts it.
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ import asyncio
 
 import pytest
 
+from fcmaster.bus.codecs import codec_for, with_protocol_delay
+from fcmaster.bus.commands import Outcome
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
@@ -20,7 +25,15 @@ from fcmaster.protocol.danfoss_fc.framer import FcFramer
 from fcmaster.protocol.danfoss_fc.profile import ControlWord, decode_reference
 from fcmaster.protocol.danfoss_fc.telegram import decode_telegram
 from fcmaster.protocol.framing import Frame
-from fcmaster.sim import DriveSettings, FcSimDrive, LineSettings, SimTransport, build_line
+from fcmaster.sim import (
+    DriveSettings,
+    EncSimDrive,
+    FcSimDrive,
+    LineSettings,
+    MitsubishiSimDrive,
+    SimTransport,
+    build_line,
+)
 from fcmaster.sim.line import SimLine
 from tests.fakes import VirtualClock
 from tests.orders import orders
@@ -110,3 +123,73 @@ async def test_a_drive_ramping_down_after_a_stop_is_adopted_stopping_and_one_at_
         assert all(runs(w) for w, _ in words), f"drive {a} told to stop"
         assert {round(r, 1) for _, r in words} == {80.0}  # 40 Hz of 50: its present output
         assert drives[a].motor.frequency_hz == pytest.approx(40.0, abs=0.01)  # no jolt
+
+
+# -- protocols whose polls never command: Mitsubishi, ENC --------------------------------------
+
+RAMPS = {"mitsubishi": ("Pr.8", 2), "enc": ("F0.09", 1)}  # deceleration time, stop bits
+
+
+def line_of(protocol: str, clock: VirtualClock) -> tuple[SimLine, LinePlan]:
+    ramp, stopbits = RAMPS[protocol]
+    settings = DriveSettings(parameters={ramp: 30.0})
+    line = build_line(
+        LineSettings(protocol=protocol, stopbits=stopbits),
+        [(a, settings) for a in (1, 2)],
+        clock=clock,
+    )
+    plan = with_protocol_delay(
+        LinePlan(
+            name="line1", port="sim://line1", protocol=protocol, stopbits=stopbits,
+            drives=tuple(DrivePlan(name=f"d{a}", address=a, control=True) for a in (1, 2)),
+        )
+    )  # fmt: skip
+    return line, plan
+
+
+@pytest.mark.parametrize("protocol", sorted(RAMPS))
+async def test_a_reference_after_a_restart_never_starts_a_drive_that_was_stopping(
+    protocol: str,
+) -> None:
+    clock = VirtualClock()
+    line, plan = line_of(protocol, clock)
+    motors = {d.address: d for d in line.drives if isinstance(d, MitsubishiSimDrive | EncSimDrive)}
+
+    def output(address: int) -> float:
+        motors[address].advance(clock.now())
+        return abs(motors[address].motor.frequency_hz)
+
+    def master() -> BusMaster:
+        return BusMaster(
+            plan, codec=codec_for(plan), transport=SimTransport(line, clock), clock=clock
+        )
+
+    first = master()
+    async with first:
+        for name in ("d1", "d2"):
+            started = await clock.complete(orders(first, name).start(frequency_hz=40.0))
+            assert started.ok, started.reason
+        await clock.run_for(30.0)  # both at speed
+        stop = asyncio.ensure_future(orders(first, "d1").stop())
+        await clock.run_for(1.0)  # d1 ramping down
+    await asyncio.wait([stop])  # the gateway is gone
+    killed_at = output(1)
+    assert 30.0 < killed_at < 40.0
+
+    second = master()
+    async with second:
+        await clock.run_for(1.0)
+        during = await clock.complete(orders(second, "d1").set_reference(frequency_hz=20.0))
+        assert during.outcome is Outcome.TIMEOUT, during
+        assert "output falling" in during.reason
+        assert output(1) < killed_at  # still ramping down: no run command reached it
+        await clock.run_for(30.0)
+        assert output(1) == 0.0
+        after = await clock.complete(orders(second, "d1").set_reference(frequency_hz=20.0))
+        assert after.ok, after.reason
+        await clock.run_for(10.0)
+        assert output(1) == 0.0  # the reference is kept for a start; it started nothing
+        at_speed = await clock.complete(orders(second, "d2").set_reference(frequency_hz=30.0))
+        assert at_speed.ok, at_speed.reason
+        await clock.run_for(10.0)
+        assert output(2) == pytest.approx(30.0, abs=0.01)  # one at speed runs on
