@@ -46,10 +46,10 @@ class Adoption:
         # Where polls never command, an adopted intent follows the drive (see above).
         self.follows = not codec.poll(address, ControlIntent(), None).carries_control
 
-    def heard(self, slot: DriveSlot, reply: Reply) -> None:
-        """A reply from the bus-controlled ``slot``: adopt it, or follow it, where due."""
+    def heard(self, slot: DriveSlot, reply: Reply, asked: ParameterKey | None) -> None:
+        """A reply (to a read of ``asked``) from the bus-controlled ``slot``: adopt it where due."""
         if slot.intent is None or (self.follows and slot.intent is slot.adopted):
-            take_over(slot, reply, self.executed)
+            take_over(slot, reply, self.executed, asked)
 
 
 def executed_control(codec: DriveCodec) -> Executed | None:
@@ -63,16 +63,26 @@ def executed_control(codec: DriveCodec) -> Executed | None:
         return None
 
 
-def take_over(slot: DriveSlot, reply: Reply, executed: Executed | None) -> None:
-    """Adopt ``slot`` from ``reply`` once its state is known enough (None until then)."""
+def take_over(
+    slot: DriveSlot, reply: Reply, executed: Executed | None, asked: ParameterKey | None = None
+) -> None:
+    """Adopt ``slot`` from ``reply`` (to a read of ``asked``) once its state is known enough."""
     if executed is not None:
         key, stopping = executed
         value = reply.value
         if value is not None and value.parameter == key and isinstance(value.raw, int):
             slot.executed, slot.executed_known = stopping(value.raw), True
-        elif slot.running and slot.at_reference is False and not slot.executed_asked:
+        elif asked == key and reply.error is not None:
+            # A drive that has no such parameter tells nothing: adopted by its status.
+            slot.executed, slot.executed_known = None, True
+        elif (
+            slot.running
+            and slot.at_reference is False
+            and not slot.executed_known
+            and key not in slot.urgent_reads
+        ):
             slot.executed_asked = True
-            slot.urgent_reads.appendleft(key)  # the next poll asks it, before anything else
+            slot.urgent_reads.appendleft(key)  # the next poll asks it (again, if one was lost)
     intent = adopted(slot)
     if (
         executed is None

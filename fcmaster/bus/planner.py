@@ -412,7 +412,7 @@ class Planner:
         self.rotation.heard(slot, kind, now, report)
         learn(slot, reply)
         if slot.plan.control:
-            self._adoption.heard(slot, reply)
+            self._adoption.heard(slot, reply, step.exchange.parameter)
         keys = self._ramp_keys
         if keys is not None and slot.plan.control:
             if not slot.ramps_asked:
