@@ -78,6 +78,7 @@ def take_over(
         elif (
             slot.running
             and slot.at_reference is False
+            and not slot.local  # in local operation the bus word is not what it executes
             and not slot.executed_known
             and key not in slot.urgent_reads
         ):

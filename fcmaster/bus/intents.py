@@ -47,6 +47,7 @@ def learn(slot: DriveSlot, reply: Reply) -> None:
     if status is not None:
         slot.running = status.running
         slot.at_reference = status.at_reference
+        slot.local = not status.accepts_bus_control
         if status.reverse is not None:
             slot.reverse = status.reverse
     output = reply.output_frequency_hz
@@ -143,7 +144,7 @@ def adopted(slot: DriveSlot) -> ControlIntent | None:
         return ControlIntent(Motion.STOP)
     if slot.running is None or slot.output_hz is None:
         return None
-    if slot.executed_asked and slot.at_reference is False:
+    if slot.executed_asked and slot.at_reference is False and not slot.local:
         if not slot.executed_known:
             return None
         if slot.executed is not None:

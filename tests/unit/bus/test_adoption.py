@@ -89,3 +89,13 @@ async def test_a_lost_read_of_16_00_is_asked_again() -> None:
         await b.clock.run_until(T0 + 1.0)
     assert lost
     assert set(commanded(b)) == {STOP_WORD}
+
+
+async def test_a_drive_in_local_operation_is_adopted_by_its_status() -> None:
+    drive = Ramping(STOP_WORD)  # the bus's last word, which local operation ignores
+    drive.local = True
+    b = bench(A, fc=[drive])
+    async with b.master:
+        await b.clock.run_until(T0 + 0.5)
+    assert 1600 not in [t.pnu for _, t in b.requests(1)]
+    assert set(commanded(b)) == {RUN_WORD}
