@@ -15,14 +15,14 @@ nothing but what ``on_shutdown`` asks for. With ``stop`` every ``control: bus`` 
 a stop, which jumps every queue, and the service waits (bounded) for the results, and
 names in an error each drive whose stop did not reach it (the line down, no answer); with
 ``hold`` the drives are left as they are and their own control-word timeout acts. Then the
-service waits (bounded) until every command still running has its outcome. The bound follows
-the drives: a stop ends once the status shows the drive stopped, by a deadline that follows
-its ramp (read from the drive, or its configured ``confirm_s``), so the service waits for the
-slowest commanded drive's stop (at least 5 s), never longer than ``shutdown_timeout_s``. A
-daemon that exits mid-ramp is no danger (the next start adopts the stop the drive executes),
-but a stop cut short has no outcome to tell. Then the lines close, ending whatever is still
-open (a client's stop still waiting for its ramp) while the adapters can still answer it, and
-the adapters close.
+service waits (bounded) until every command still running has its outcome. With ``stop`` the
+bound follows the drives: a stop ends once the status shows the drive stopped, by a deadline
+that follows its ramp (read from the drive, or its configured ``confirm_s``), so the service
+waits for the slowest commanded drive's stop (at least 5 s), never longer than
+``shutdown_timeout_s``; with ``hold`` it is 5 s. A daemon that exits mid-ramp is no danger
+(the next start adopts the stop the drive executes), but a stop cut short has no outcome to
+tell. Then the lines close, ending whatever is still open (a client's stop still waiting for
+its ramp) while the adapters can still answer it, and the adapters close.
 
 Under systemd with ``Type=notify`` (``$NOTIFY_SOCKET`` set), the service says ``READY=1``
 once every line's port has been tried and every adapter is serving, and ``STOPPING=1``
@@ -297,8 +297,11 @@ class Service:
         """How long the shutdown may wait: the slowest commanded drive's stop, within the cap.
 
         A stop's own deadline already has a grace beyond the ramp (confirm.RAMP_GRACE_S), so a
-        drive that stops within its ramp shows it before this bound.
+        drive that stops within its ramp shows it before this bound. With ``hold`` the drives
+        are left as they are: a client's command still running gets the least bound.
         """
+        if self.config.model.on_shutdown != "stop":
+            return min(self.config.model.shutdown_timeout_s, SHUTDOWN_STOP_TIMEOUT_S)
         slowest = [
             stop_time(slot)
             for master in self.masters.values()

@@ -213,3 +213,26 @@ async def test_a_command_arriving_during_the_shutdown_is_audited_cancelled_with_
         "reason": "fcmaster is shutting down",
         "bus": "line1",
     }
+
+
+async def test_with_hold_a_clients_stop_waiting_for_a_long_ramp_ends_at_the_least_bound() -> None:
+    clock = VirtualClock(T0)
+    a, b = FcDrive(1, running=True, output_pct=50.0), Ramping(2, clock, ramp_s=60.0)
+    service = Service(
+        parse(CONFIG.replace("on_shutdown: stop", "on_shutdown: hold")),
+        clock=clock,
+        transport_factory=lambda _: ScriptedTransport(clock, FcLine(a, b), delay_s=DELAY_S),
+    )
+    task = asyncio.ensure_future(service.run(install_signals=False))
+    await clock.run_until(T0 + 1.0)
+    stop = asyncio.ensure_future(service.execute("b", Command(action=Action.STOP, actor="ops")))
+    await clock.run_until(T0 + 1.5)  # acknowledged: b ramps down for 30 s
+    with structlog.testing.capture_logs() as logs:
+        service.stop()
+        await clock.complete(task, within=60.0)
+    result = await stop
+    assert result.outcome is Outcome.UNCONFIRMED
+    assert "shut down before the drive's status showed the result" in result.reason
+    assert 5.0 <= clock.now() - (T0 + 1.5) < 6.0  # hold: the 5 s bound, not b's ramp
+    assert a.running  # left as it was
+    assert [e for e in logs if e["event"] == "service.shutdown_commands_timed_out"]
