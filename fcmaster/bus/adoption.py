@@ -10,8 +10,10 @@ is read first, and a drive executing a stop is adopted with that stop: a gateway
 during an operator's stop never commands the motor back to speed; one executing motion is
 adopted running at its present output.
 
-Where nothing tells (Mitsubishi, ENC), a drive whose output is falling is not adopted
-until it stands (a stop) or holds its speed (running there): until then a command that
+Where nothing tells (Mitsubishi, ENC), a drive running off its reference (Mitsubishi: SU
+off; ENC never says) is adopted only once two reads of its output show it is not falling,
+and one whose output falls is not adopted until it stands (a stop) or holds its speed
+(running there): until then a command that
 changes only part of its state (a reference, a direction) cannot be built on it and is not
 sent, so it cannot start a drive that was stopping. On these protocols the idle poll never
 commands, so an adopted intent is only the master's note of what the drive does: it follows
@@ -89,9 +91,11 @@ def take_over(
         executed is None
         and intent is not None
         and intent.motion is Motion.RUN
-        and slot.output_falling
+        and (slot.output_falling or (slot.output_falling is None and not slot.at_reference))
     ):
-        intent = None  # ramping down: stopping, or slowing to a new speed; not yet known
+        # Ramping down (stopping, or slowing to a new speed), or off its reference and not
+        # known yet whether it is: one output read says nothing of where it is going.
+        intent = None
     slot.intent = slot.adopted = intent
 
 
@@ -99,4 +103,6 @@ def not_adopted(slot: DriveSlot) -> str:
     """Why ``slot``'s state is not known well enough to build a command on it, in words."""
     if slot.running and slot.output_falling:
         return "running with its output falling (stopping, or slowing to a new speed)"
+    if slot.running and slot.output_falling is None and slot.output_hz is not None:
+        return "running, and its output read only once: whether it is falling is not known"
     return "running, but no output reported"

@@ -53,7 +53,7 @@ def learn(slot: DriveSlot, reply: Reply) -> None:
     output = reply.output_frequency_hz
     if output is not None:
         before = slot.output_hz
-        slot.output_falling = before is not None and abs(output) < before - FALLING_HZ
+        slot.output_falling = None if before is None else abs(output) < before - FALLING_HZ
         slot.output_hz = abs(output)
         if output and status is None:
             slot.reverse = output < 0
@@ -62,7 +62,8 @@ def learn(slot: DriveSlot, reply: Reply) -> None:
 def _unlearn(slot: DriveSlot) -> None:
     """Drop what the drive was reported doing, so it is learned anew before adoption."""
     slot.running = slot.output_hz = slot.at_reference = slot.executed = None
-    slot.executed_asked = slot.executed_known = slot.output_falling = False
+    slot.output_falling = None
+    slot.executed_asked = slot.executed_known = False
 
 
 def forget(slot: DriveSlot) -> None:

@@ -69,7 +69,8 @@ class DriveSlot:
     executed_asked: bool = False
     executed_known: bool = False
     executed: Motion | None = None
-    output_falling: bool = False  # the last output read was below the one before
+    # The last output read was below the one before; None: fewer than two read yet.
+    output_falling: bool | None = None
     adopted: ControlIntent | None = None  # the intent adoption set, while it is the intent
 
     @property
