@@ -3,7 +3,7 @@
 `fcmaster run` as a subprocess on a pseudo-terminal served by simulated FC drives in this
 process, so every telegram each daemon sends is decoded here together with what the drive
 was doing when it arrived. Four drives run at 40 Hz; two are stopped on a long ramp
-(3-42 = 30 s) and the daemon is killed (SIGKILL: no shutdown of any kind) a moment later.
+(3-42 = 45 s) and the daemon is killed (SIGKILL: no shutdown of any kind) a moment later.
 A second daemon adopts the line while they still ramp down: it must never put a run word
 to them on the wire, and they reach standstill; the two at speed must never get a stop word
 and keep their speed.
@@ -86,7 +86,7 @@ def output(drive: FcSimDrive, clock: MonotonicClock) -> float:
 
 async def test_a_restart_never_starts_a_drive_ramping_down_after_a_stop(tmp_path: Path) -> None:
     clock = MonotonicClock()
-    settings = DriveSettings(parameters={"3-42": 30.0})  # 30 s from 50 Hz to 0
+    settings = DriveSettings(parameters={"3-42": 45.0})  # 45 s from 50 Hz to 0
     line = build_line(LineSettings(baudrate=19200), [(a, settings) for a in ADDRESSES], clock=clock)
     drives = {d.address: d for d in line.drives if isinstance(d, FcSimDrive)}
     wire = Wire(drives, clock)

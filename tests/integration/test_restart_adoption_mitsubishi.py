@@ -2,7 +2,7 @@
 
 `fcmaster run` as a subprocess on a pseudo-terminal served by simulated Mitsubishi inverters
 in this process; every run command an inverter takes is recorded with the time it came.
-Two drives run at 40 Hz; one is stopped on a long deceleration (Pr.8 = 30 s) and the daemon
+Two drives run at 40 Hz; one is stopped on a long deceleration (Pr.8 = 45 s) and the daemon
 is killed (SIGKILL) a moment later. The daemon after it polls without commanding, so the
 danger is the next command that changes only the reference: sent while the drive still
 ramps down it must end without reaching the drive (``timeout``, HTTP 504, the reason
@@ -48,7 +48,7 @@ MOTION = RunCommand.STF | RunCommand.STR
 
 async def test_a_restart_never_starts_a_mitsubishi_drive_that_was_stopping(tmp_path: Path) -> None:
     clock = MonotonicClock()
-    settings = DriveSettings(parameters={"Pr.8": 30.0})
+    settings = DriveSettings(parameters={"Pr.8": 45.0})
     line = build_line(
         LineSettings(protocol="mitsubishi", stopbits=2), [(1, settings), (2, settings)], clock=clock
     )
