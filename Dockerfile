@@ -3,7 +3,7 @@
 # shows them). README.md "Running with Docker" has the whole story.
 #
 #   docker build -t fcmaster .
-#   docker run -d --name fcmaster --restart unless-stopped --read-only \
+#   docker run -d --name fcmaster --restart unless-stopped --read-only --stop-timeout 75 \
 #       --device /dev/ttyUSB0 \
 #       -v "$PWD/plant.yaml:/etc/fcmaster/config.yaml:ro" \
 #       -p 127.0.0.1:8080:8080 -p 127.0.0.1:5020:5020 \
@@ -62,7 +62,8 @@ EXPOSE 8080 5020
 ENV FCMASTER_HEALTH_URL=http://127.0.0.1:8080/
 HEALTHCHECK --interval=30s --timeout=5s --start-period=60s --retries=3 \
     CMD ["python3", "-c", "import os, urllib.request as r; r.build_opener(r.ProxyHandler({})).open(os.environ['FCMASTER_HEALTH_URL'], timeout=4)"]
-# `docker stop` sends SIGTERM: the daemon shuts down in order (on_shutdown) and exits 0.
+# `docker stop` sends SIGTERM: the daemon shuts down in order (on_shutdown) and exits 0,
+# waiting for the drives' stops up to shutdown_timeout_s (60 s): --stop-timeout 75.
 STOPSIGNAL SIGTERM
 ENTRYPOINT ["fcmaster"]
 CMD ["run"]

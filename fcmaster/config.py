@@ -176,6 +176,9 @@ class ConfigModel(_Model):
     metrics: MetricsModel | None = None
     logging: LoggingModel = LoggingModel()
     on_shutdown: Literal["hold", "stop"] = "hold"
+    # The most a shutdown waits for stops and commands to end; within it, only as long as
+    # the commanded drives' ramps need (service.py). Service managers must allow more.
+    shutdown_timeout_s: float = Field(default=60.0, gt=0, le=3600)
 
 
 @dataclass(slots=True, frozen=True)

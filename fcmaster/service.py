@@ -15,8 +15,14 @@ nothing but what ``on_shutdown`` asks for. With ``stop`` every ``control: bus`` 
 a stop, which jumps every queue, and the service waits (bounded) for the results, and
 names in an error each drive whose stop did not reach it (the line down, no answer); with
 ``hold`` the drives are left as they are and their own control-word timeout acts. Then the
-service waits (bounded) until every command still running has its outcome, so that each
-client gets its answer before the adapters close; then the lines close.
+service waits (bounded) until every command still running has its outcome. With ``stop`` the
+bound follows the drives: a stop ends once the status shows the drive stopped, by a deadline
+that follows its ramp (read from the drive, or its configured ``confirm_s``), so the service
+waits for the slowest commanded drive's stop (at least 5 s), never longer than
+``shutdown_timeout_s``; with ``hold`` it is 5 s. A daemon that exits mid-ramp is no danger
+(the next start adopts the stop the drive executes), but a stop cut short has no outcome to
+tell. Then the lines close, ending whatever is still open (a client's stop still waiting for
+its ramp) while the adapters can still answer it, and the adapters close.
 
 Under systemd with ``Type=notify`` (``$NOTIFY_SOCKET`` set), the service says ``READY=1``
 once every line's port has been tried and every adapter is serving, and ``STOPPING=1``
@@ -37,8 +43,10 @@ from typing import Any
 import structlog
 
 from fcmaster.adapters.gateway import LineInfo
+from fcmaster.bus.audit import audit, command_values
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.confirm import stop_known, stop_time
 from fcmaster.bus.frame_log import FramesSince
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
@@ -54,8 +62,7 @@ from fcmaster.transport.serial import SerialTransport
 log = structlog.get_logger("fcmaster.service")
 
 STATS_INTERVAL_S = 5.0
-SHUTDOWN_STOP_TIMEOUT_S = 5.0
-SHUTDOWN_COMMANDS_S = 5.0  # commands on the wire at shutdown: time to get their outcome
+SHUTDOWN_STOP_TIMEOUT_S = 5.0  # the least a shutdown waits for stops and commands to end
 SHUTDOWN_ACTOR = "shutdown"
 SHUTTING_DOWN = "fcmaster is shutting down"
 
@@ -180,16 +187,19 @@ class Service:
         except KeyError:
             return CommandResult(outcome=Outcome.INVALID, reason=f"no drive called {drive!r}")
         if self._stopping.is_set():
-            log.info(
-                "command.completed",
-                actor=command.actor or "-",
-                bus=master.plan.name,
+            result = CommandResult(outcome=Outcome.CANCELLED, reason=SHUTTING_DOWN)
+            plan = self.drive_plan(drive)
+            nominal = None if plan is None else plan.nominal_frequency_hz
+            audit(
+                log,
+                actor=command.actor,
                 drive=drive,
-                command=command.action.value,
-                outcome=Outcome.CANCELLED.value,
-                reason=SHUTTING_DOWN,
+                action=command.action.value,
+                values=command_values(command, nominal),
+                result=result,
+                bus=master.plan.name,
             )
-            return CommandResult(outcome=Outcome.CANCELLED, reason=SHUTTING_DOWN)
+            return result
         self._running_commands += 1
         self._no_commands.clear()
         try:
@@ -250,11 +260,16 @@ class Service:
                 notify_systemd("STOPPING=1")
                 for audit in self._audits:
                     audit.stop()  # no more watchdog reads or writes: only what on_shutdown asks
+                deadline = self.clock.now() + self._shutdown_bound_s()
                 for master in self.masters.values():
                     master.cancel_queued(SHUTTING_DOWN)
                 if self.config.model.on_shutdown == "stop":
-                    await self._stop_drives()
-                await self._commands_ended()
+                    await self._stop_drives(deadline)
+                await self._commands_ended(deadline)
+                for master in self.masters.values():
+                    # What is still open ends now, while the adapters (closing first on the
+                    # way out) can still answer its client.
+                    await master.close()
         finally:
             if install_signals:
                 for sig in (signal.SIGTERM, signal.SIGINT):
@@ -278,7 +293,25 @@ class Service:
         adapter: AbstractAsyncContextManager[Any] = factory(settings, self, **options)
         return adapter
 
-    async def _stop_drives(self) -> None:
+    def _shutdown_bound_s(self) -> float:
+        """How long the shutdown may wait: the slowest commanded drive's stop, within the cap.
+
+        A stop's own deadline already has a grace beyond the ramp (confirm.RAMP_GRACE_S), so a
+        drive that stops within its ramp shows it before this bound. With ``hold`` the drives
+        are left as they are: a client's command still running gets the least bound.
+        """
+        if self.config.model.on_shutdown != "stop":
+            return min(self.config.model.shutdown_timeout_s, SHUTDOWN_STOP_TIMEOUT_S)
+        slowest = [
+            stop_time(slot)
+            for master in self.masters.values()
+            for slot in master.planner.slots
+            if slot.plan.control and stop_known(slot)
+        ]
+        cap = self.config.model.shutdown_timeout_s
+        return min(cap, max([SHUTDOWN_STOP_TIMEOUT_S, *slowest]))
+
+    async def _stop_drives(self, deadline: float) -> None:
         """Send a stop to every bus-controlled drive and wait, bounded, for the results.
 
         A stop that ended without reaching its drive (the line down, no answer, a refusal)
@@ -298,7 +331,7 @@ class Service:
             return
         # Bounded on the service's clock (virtual in tests), as the lines' own waits are.
         bound: asyncio.Future[None] = asyncio.ensure_future(
-            self.clock.sleep(SHUTDOWN_STOP_TIMEOUT_S)
+            self.clock.sleep(max(0.0, deadline - self.clock.now()))
         )
         waiting: set[asyncio.Future[Any]] = set(orders.values())
         try:
@@ -331,12 +364,16 @@ class Service:
                     reason=result.reason,
                 )
 
-    async def _commands_ended(self) -> None:
-        """Wait (bounded) until every command taken before the shutdown has its outcome."""
+    async def _commands_ended(self, deadline: float) -> None:
+        """Wait, until ``deadline``, for every command taken before the shutdown to end."""
+        ended = asyncio.ensure_future(self._no_commands.wait())
+        bound = asyncio.ensure_future(self.clock.sleep(max(0.0, deadline - self.clock.now())))
         try:
-            async with asyncio.timeout(SHUTDOWN_COMMANDS_S):
-                await self._no_commands.wait()
-        except TimeoutError:
+            await asyncio.wait((ended, bound), return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            bound.cancel()
+            ended.cancel()
+        if not self._no_commands.is_set():
             log.warning("service.shutdown_commands_timed_out", running=self._running_commands)
 
     async def _publish_stats(self) -> None:

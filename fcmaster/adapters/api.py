@@ -5,9 +5,11 @@ Reads come from the fleet state in memory; commands and parameter access go thro
 ``gateway.execute`` and answer once the command has its one result, with the HTTP status
 of :data:`OUTCOME_STATUS` and the result JSON (``outcome``, ``reason``, …) as the body.
 Refusals before a command reaches a line (no or wrong token, a viewer's command, a
-malformed body) are logged as ``http.command_refused`` with the actor and the reason; the
-bus logs every command that reaches it as ``command.completed`` with the same actor. How a
-request's body, caller and refusals are read lives in :mod:`fcmaster.adapters.api_requests`.
+malformed body) are logged as ``http.command_refused`` with the actor and the reason; a
+command refused for what it says (malformed, beyond limits, no such drive) is also audited
+as ``command.completed`` with its values, the line the bus gives every command that reaches
+it, with the same actor. How a request's body, caller and refusals are read lives in
+:mod:`fcmaster.adapters.api_requests`.
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ from fcmaster.adapters.api_requests import (
     describe_error,
     log_refused,
     peek_action,
+    peek_payload,
+    refused_command,
 )
 from fcmaster.adapters.auth import Authenticator, AuthError, Principal, Role
 from fcmaster.adapters.command_json import parse_command, refusal
@@ -163,15 +167,17 @@ def create_app(
     ) -> Response:
         """Validate ``payload`` as a command for drive ``name``, carry it out, answer."""
         plan = gateway.drive_plan(name)
-        if plan is None or gateway.fleet.find(name) is None:
+        state = gateway.fleet.find(name)
+        if plan is None or state is None:
             reason = f"no drive called {name!r}"
-            log_refused(principal.name, name, payload.get("action"), "invalid", reason)
+            no_drive = CommandResult(outcome=Outcome.INVALID, reason=reason)
+            refused_command(principal.name, name, payload, no_drive, None)
             raise HTTPException(404, reason)
         try:
             command: Command = parse_command(payload, plan, actor=principal.name)
         except UsageError as exc:
             result = refusal(exc)
-            log_refused(principal.name, name, payload.get("action"), result.outcome, str(exc))
+            refused_command(principal.name, name, payload, result, state.bus)
             return result_response(result, **extra)
         return result_response(await gateway.execute(name, command), **extra)
 
@@ -195,14 +201,16 @@ def create_app(
         errors = jsonable_encoder(exc.errors())
         reason = "; ".join(describe_error(e) for e in errors)
         if request.method in ("POST", "PUT"):
-            actor = actor_of(auth, request)
-            log_refused(
-                actor,
-                request.path_params.get("name"),
-                await peek_action(request),
-                "invalid",
-                reason,
-            )
+            name = str(request.path_params.get("name"))
+            state = gateway.fleet.find(name)
+            invalid = CommandResult(outcome=Outcome.INVALID, reason=reason)
+            payload = await peek_payload(request)
+            param = request.path_params.get("param")
+            if request.method == "PUT" and param is not None:  # a parameter write's body
+                body = payload if isinstance(payload, dict) else {}
+                payload = {**body, "action": "write", "parameter": param}
+            bus = None if state is None else state.bus
+            refused_command(actor_of(auth, request), name, payload, invalid, bus)
         return json_response({"outcome": "invalid", **error_body(reason, errors)}, 422)
 
     @app.exception_handler(HTTPException)

@@ -3,8 +3,11 @@
 Command bodies follow the rules of :mod:`fcmaster.adapters.command_json` (no duplicated
 key, no NaN) because every route reads its body through :class:`StrictJsonRoute`. The
 caller is the :class:`~fcmaster.adapters.auth.Principal` its bearer token names
-(:data:`Viewer`, :data:`Operator` as route dependencies). A command refused before it
-reaches a line is logged once as ``http.command_refused`` by :func:`log_refused`.
+(:data:`Viewer`, :data:`Operator` as route dependencies). A request refused before it
+reaches a line is logged as ``http.command_refused`` by :func:`log_refused`; one refused as
+a command (malformed, beyond the drive's limits, no such drive) is also audited as every
+ended command is, with its values (:func:`refused_command`). One refused for its caller (no
+token, a viewer's) is no one's command: only the first.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ from starlette.types import Scope
 from fcmaster.adapters.auth import Authenticator, AuthError, Principal, Role
 from fcmaster.adapters.command_json import loads
 from fcmaster.adapters.middleware import replaying
+from fcmaster.bus.audit import audit, payload_values
+from fcmaster.bus.commands import CommandResult
 
 log = structlog.get_logger("fcmaster.adapters.http")
 
@@ -38,12 +43,20 @@ def describe_error(error: dict[str, Any]) -> str:
     return f"{where}: {error.get('msg', 'invalid')}"
 
 
-async def peek_action(request: Request) -> str | None:
-    """The ``action`` a request's body names, if it can be read at all (for the log)."""
+async def peek_payload(request: Request) -> object:
+    """A request's body as JSON, if it can be read at all (for the log); None if not."""
     try:
-        payload = loads(await request.body())
+        return loads(await request.body())
     except (ValueError, ClientDisconnect, HTTPException):  # not JSON, gone, or too large
         return None
+
+
+async def peek_action(request: Request) -> str | None:
+    """The ``action`` a request's body names, if it can be read at all (for the log)."""
+    return _action(await peek_payload(request))
+
+
+def _action(payload: object) -> str | None:
     action = payload.get("action") if isinstance(payload, dict) else None
     return action if isinstance(action, str) else None
 
@@ -144,4 +157,21 @@ def log_refused(actor: str, drive: object, action: object, outcome: str, reason:
         command=action if isinstance(action, str) else None,
         outcome=outcome,
         reason=reason,
+    )
+
+
+def refused_command(
+    actor: str, drive: str, payload: object, result: CommandResult, bus: str | None
+) -> None:
+    """A command that ended before it reached a line: logged, and audited with its values."""
+    action = _action(payload)
+    log_refused(actor, drive, action, result.outcome.value, result.reason)
+    audit(
+        log,
+        actor=actor,
+        drive=drive,
+        action=action,
+        values=payload_values(payload),
+        result=result,
+        bus=bus,
     )

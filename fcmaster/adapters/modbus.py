@@ -43,7 +43,7 @@ from typing import Any, Final
 
 import structlog
 
-from fcmaster.adapters.command_json import parse_command
+from fcmaster.adapters.command_json import parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.modbus_frames import (
     Broken,
@@ -65,7 +65,8 @@ from fcmaster.adapters.modbus_map import (
     register_map,
 )
 from fcmaster.adapters.settings import ModbusSettings, modbus_listen
-from fcmaster.bus.commands import CommandResult
+from fcmaster.bus.audit import audit, payload_values
+from fcmaster.bus.commands import CommandResult, Outcome
 from fcmaster.bus.plan import LinePlan
 from fcmaster.errors import ConfigError, FcmasterError, UsageError
 
@@ -322,7 +323,7 @@ class ModbusAdapter:
             try:
                 command = parse_command(payload, unit.drive, actor=actor)
             except UsageError as exc:
-                self._refuse(actor, drive, str(exc))
+                self._refused_command(actor, drive, payload, refusal(exc))
                 raise _Refused(ExceptionCode.ILLEGAL_DATA_VALUE) from None
             result: CommandResult = await self.gateway.execute(drive, command)
             if not result.ok:
@@ -343,7 +344,9 @@ class ModbusAdapter:
         action = ACTIONS.get(code)
         if action is None:
             known = ", ".join(f"{c} {a}" for c, a in ACTIONS.items())
-            self._refuse(actor, drive, f"command {code} is no action code ({known})")
+            reason = f"command {code} is no action code ({known})"
+            invalid = CommandResult(outcome=Outcome.INVALID, reason=reason)
+            self._refused_command(actor, drive, {"value": code, **frequency}, invalid)
             raise _Refused(ExceptionCode.ILLEGAL_DATA_VALUE)
         if action == "start":
             return [{"action": "start", **frequency}]
@@ -352,3 +355,19 @@ class ModbusAdapter:
     @staticmethod
     def _refuse(actor: str, drive: str, reason: str) -> None:
         log.info("modbus.command_refused", actor=actor, drive=drive, reason=reason)
+
+    def _refused_command(
+        self, actor: str, drive: str, payload: dict[str, Any], result: CommandResult
+    ) -> None:
+        """A write refused as a command: logged, and audited with the values it carried."""
+        self._refuse(actor, drive, result.reason)
+        state = self.gateway.fleet.find(drive)
+        audit(
+            log,
+            actor=actor,
+            drive=drive,
+            action=payload.get("action"),
+            values=payload_values(payload),
+            result=result,
+            bus=None if state is None else state.bus,
+        )

@@ -22,6 +22,7 @@ from fcmaster.adapters.command_json import loads, parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.mqtt_outbox import Outbox
 from fcmaster.adapters.mqtt_topics import Topics, result_payload
+from fcmaster.bus.audit import audit, payload_values
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.errors import UsageError
 
@@ -107,15 +108,19 @@ class CommandDesk:
         command_id = data.get("id")
         raw_action = data.get("action")
         action = raw_action if isinstance(raw_action, str) else None
+        given = payload_values(data)  # for the audit of a refusal
         if "id" not in data:
-            self._invalid(bus, drive, None, action, "'id' is missing: the result carries it")
+            reason = "'id' is missing: the result carries it"
+            self._invalid(bus, drive, None, action, reason, given)
             return
         if isinstance(command_id, bool) or not isinstance(command_id, str | int):
-            self._invalid(bus, drive, command_id, action, "'id' must be a string or an integer")
+            reason = "'id' must be a string or an integer"
+            self._invalid(bus, drive, command_id, action, reason, given)
             return
         if not self._policy.enabled:
             reason = "commands over MQTT are off (mqtt.commands: false)"
-            self._refused(bus, drive, command_id, action, _result(Outcome.NOT_ALLOWED, reason))
+            off = _result(Outcome.NOT_ALLOWED, reason)
+            self._refused(bus, drive, command_id, action, off, given)
             return
         data = dict(data)
         secret = data.pop("token", None)
@@ -124,18 +129,18 @@ class CommandDesk:
             try:
                 actor = self._operator(secret)
             except AuthError as exc:
-                self._refused(
-                    bus, drive, command_id, action, _result(Outcome.NOT_ALLOWED, exc.reason)
-                )
+                denied = _result(Outcome.NOT_ALLOWED, exc.reason)
+                self._refused(bus, drive, command_id, action, denied, given)
                 return
         plan = self._gateway.drive_plan(drive)
         if plan is None or self._gateway.fleet.get(bus, drive) is None:
-            self._invalid(bus, drive, command_id, action, f"no drive {drive!r} on bus {bus!r}")
+            reason = f"no drive {drive!r} on bus {bus!r}"
+            self._invalid(bus, drive, command_id, action, reason, given)
             return
         try:
             command = parse_command(data, plan, actor=actor)
         except UsageError as exc:
-            self._refused(bus, drive, command_id, action, refusal(exc))
+            self._refused(bus, drive, command_id, action, refusal(exc), given, actor=actor)
             return
         task = asyncio.create_task(
             self._execute(bus, drive, command_id, command), name=f"mqtt.command[{bus}/{drive}]"
@@ -166,22 +171,38 @@ class CommandDesk:
         self._answer(bus, drive, command_id, action, result)
 
     def _invalid(
-        self, bus: str, drive: str, command_id: Any, action: str | None, reason: str
+        self,
+        bus: str,
+        drive: str,
+        command_id: Any,
+        action: str | None,
+        reason: str,
+        given: dict[str, object] | None = None,
     ) -> None:
-        self._refused(bus, drive, command_id, action, _result(Outcome.INVALID, reason))
+        invalid = _result(Outcome.INVALID, reason)
+        self._refused(bus, drive, command_id, action, invalid, given)
 
     def _refused(
-        self, bus: str, drive: str, command_id: Any, action: str | None, result: CommandResult
+        self,
+        bus: str,
+        drive: str,
+        command_id: Any,
+        action: str | None,
+        result: CommandResult,
+        given: dict[str, object] | None = None,
+        *,
+        actor: str | None = None,
     ) -> None:
-        log.info(
-            "command.completed",
-            actor=self.actor,
-            bus=bus,
+        """A command that ends here, before a line: audited with the values it carried."""
+        audit(
+            log,
+            actor=actor or self.actor,
             drive=drive,
-            command=action or "-",
+            action=action,
+            values=given or {},
+            result=result,
+            bus=bus,
             command_id=command_id,
-            outcome=result.outcome.value,
-            reason=result.reason,
         )
         self._answer(bus, drive, command_id, action, result)
 

@@ -70,13 +70,24 @@ def note_ramp(slot: DriveSlot, keys: tuple[ParameterKey, ParameterKey], reply: R
 
 def confirm_time(slot: DriveSlot, pending: Pending) -> float:
     """How long the status may take to show ``pending``'s result."""
+    if pending.command.action in (Action.STOP, Action.QUICK_STOP):
+        return stop_time(slot)
+    return CONFIRM_DEFAULT_S if slot.plan.confirm_s is None else slot.plan.confirm_s
+
+
+def stop_time(slot: DriveSlot) -> float:
+    """How long a stop of ``slot`` may take to show: configured, or by its ramp, once read."""
     if slot.plan.confirm_s is not None:
         return slot.plan.confirm_s
-    action = pending.command.action
-    if action not in (Action.STOP, Action.QUICK_STOP) or slot.ramp_down_s is None:
+    if slot.ramp_down_s is None:
         return CONFIRM_DEFAULT_S
     scale = max(1.0, _pct(slot) / 100.0)
     return max(CONFIRM_DEFAULT_S, slot.ramp_down_s * scale + RAMP_GRACE_S)
+
+
+def stop_known(slot: DriveSlot) -> bool:
+    """Whether :func:`stop_time` follows the drive (configured, or its ramp read)."""
+    return slot.plan.confirm_s is not None or slot.ramp_down_s is not None
 
 
 def verdict(slot: DriveSlot, pending: Pending, now: float) -> CommandResult | None:

@@ -17,6 +17,7 @@ from fcmaster.protocol.drive import ControlIntent, Motion, hz_to_pct
 
 STOPPING = (Motion.STOP, Motion.COAST, Motion.QUICK_STOP)
 REFERENCE_LIMIT_PCT = 199.99  # the most a reference can say (FC: 0x7FFF); adoption stays below
+FALLING_HZ = 0.005  # an output lower than the one read before by more than this is falling
 # Actions that change only part of the commanded state, so the rest must be known first
 # (so does a start that keeps the present reference).
 RELATIVE_ACTIONS = frozenset((Action.FORWARD, Action.REVERSE, Action.SET_REFERENCE, Action.RESET))
@@ -45,18 +46,29 @@ def learn(slot: DriveSlot, reply: Reply) -> None:
     status = reply.status
     if status is not None:
         slot.running = status.running
+        slot.at_reference = status.at_reference
+        slot.local = not status.accepts_bus_control
         if status.reverse is not None:
             slot.reverse = status.reverse
     output = reply.output_frequency_hz
     if output is not None:
+        before = slot.output_hz
+        slot.output_falling = None if before is None else abs(output) < before - FALLING_HZ
         slot.output_hz = abs(output)
         if output and status is None:
             slot.reverse = output < 0
 
 
+def _unlearn(slot: DriveSlot) -> None:
+    """Drop what the drive was reported doing, so it is learned anew before adoption."""
+    slot.running = slot.output_hz = slot.at_reference = slot.executed = None
+    slot.output_falling = None
+    slot.executed_asked = slot.executed_known = False
+
+
 def forget(slot: DriveSlot) -> None:
     """What the drive was doing is no longer known: keep a stop, drop a motion."""
-    slot.running = slot.output_hz = None
+    _unlearn(slot)
     if slot.intent is not None and slot.intent.motion not in STOPPING:
         slot.intent = None
 
@@ -69,13 +81,13 @@ def unknown(slot: DriveSlot) -> None:
     good status is adopted, as at start-up.
     """
     slot.intent = None
-    slot.running = slot.output_hz = None
+    _unlearn(slot)
 
 
 def restarted(slot: DriveSlot, until: float) -> None:
     """The drive restarts and hears nothing until ``until``; its output is off."""
     slot.deaf_until = until
-    slot.running = slot.output_hz = None
+    _unlearn(slot)
     if slot.intent is not None:
         slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP, reset=False)
 
@@ -125,18 +137,27 @@ def adopted(slot: DriveSlot) -> ControlIntent | None:
     """The intent that keeps a drive doing what it does now; None while that is not known.
 
     A running drive is adopted only once its output is known too, so it is never commanded
-    to a reference it is not running at.
+    to a reference it is not running at. One found off its reference while what it
+    executes was asked (:mod:`~fcmaster.bus.adoption`) waits for the answer: ramping down
+    after a stop it keeps being told that stop, so a restart never starts it again.
     """
     if slot.running is False:
         return ControlIntent(Motion.STOP)
     if slot.running is None or slot.output_hz is None:
         return None
+    if slot.executed_asked and slot.at_reference is False and not slot.local:
+        if not slot.executed_known:
+            return None
+        if slot.executed is not None:
+            return ControlIntent(slot.executed, slot.reverse)
     pct = min(hz_to_pct(slot.output_hz, slot.plan.nominal_frequency_hz), REFERENCE_LIMIT_PCT)
     return ControlIntent(Motion.RUN, slot.reverse, pct)
 
 
 def learning_read(slot: DriveSlot, pending: Pending) -> ParameterKey | None:
     """What the next state-learning poll reads besides the status (None: status only)."""
+    if slot.executed_asked and not slot.executed_known and slot.urgent_reads:
+        return slot.urgent_reads[0]  # what it executes, asked by adoption: before the rest
     reads = [key for key in slot.sequence if key is not None]
     if not pending.learned or not reads:
         return None

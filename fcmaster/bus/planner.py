@@ -72,10 +72,10 @@ from __future__ import annotations
 import dataclasses
 
 from fcmaster.bus import admission
+from fcmaster.bus.adoption import Adoption, not_adopted
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.confirm import LOCAL, needs_confirmation, note_ramp, ramp_keys
 from fcmaster.bus.intents import (
-    adopted,
     apply,
     current,
     forget,
@@ -152,6 +152,7 @@ class Planner:
         self._in_flight: Pending | None = None  # the command whose step is on the wire
         self._confirming = Confirmations()  # acknowledged, waiting for the status to show it
         self._ramp_keys = ramp_keys(codec)  # read from each bus-controlled drive once online
+        self._adoption = Adoption(codec)
         self._peeked: Step | None = None  # the step peek chose, until it is committed
 
     # -- commands in -------------------------------------------------------------------
@@ -410,8 +411,8 @@ class Planner:
         kind = None if step.kind is StepKind.COMMAND else step.kind
         self.rotation.heard(slot, kind, now, report)
         learn(slot, reply)
-        if slot.plan.control and slot.intent is None:
-            slot.intent = adopted(slot)
+        if slot.plan.control:
+            self._adoption.heard(slot, reply, step.exchange.parameter)
         keys = self._ramp_keys
         if keys is not None and slot.plan.control:
             if not slot.ramps_asked:
@@ -474,8 +475,7 @@ class Planner:
                         report,
                         result_of(
                             Outcome.TIMEOUT,
-                            f"{slot.name}'s state could not be learned (running, but no "
-                            "output reported)",
+                            f"{slot.name}'s state could not be learned ({not_adopted(slot)})",
                         ),
                     )
                 return

@@ -15,13 +15,13 @@ from collections.abc import Callable
 from functools import partial
 from typing import Any
 
-from fcmaster.bus.commands import Action, Command, CommandResult
+from fcmaster.bus.audit import audit, command_values
+from fcmaster.bus.commands import Action
 from fcmaster.bus.observer import BusObserver
 from fcmaster.bus.planner import Completion, Planner, Report, Step, StepKind
 from fcmaster.bus.stats import LineStats
 from fcmaster.clock import Clock
 from fcmaster.protocol.codec import Reply
-from fcmaster.protocol.drive import pct_to_hz
 
 
 class LineReporter:
@@ -102,14 +102,15 @@ class LineReporter:
                     if isinstance(ticket, asyncio.Future) and not ticket.done():
                         ticket.set_result(result)
                 continue
-            self._log.info(
-                "command.completed",
-                actor=command.actor or "-",
+            slot = self._planner.find(completion.drive)
+            nominal = None if slot is None else slot.plan.nominal_frequency_hz
+            audit(
+                self._log,
+                actor=command.actor,
                 drive=completion.drive,
-                command=command.action.value,
-                **self._values(completion.drive, command, result),
-                outcome=result.outcome.value,
-                reason=result.reason or None,
+                action=command.action.value,
+                values=command_values(command, nominal, result),
+                result=result,
             )
             for ticket in completion.tickets:
                 if isinstance(ticket, asyncio.Future) and not ticket.done():
@@ -117,25 +118,6 @@ class LineReporter:
             self.notify(
                 self._observer.command_completed, self._bus, completion.drive, command, result
             )
-
-    def _values(self, drive: str, command: Command, result: CommandResult) -> dict[str, object]:
-        """The values a command carried (and a read returned), for its audit line."""
-        values: dict[str, object] = {}
-        if command.reference_pct is not None:
-            values["reference_pct"] = command.reference_pct
-            slot = self._planner.find(drive)
-            if slot is not None:
-                nominal = slot.plan.nominal_frequency_hz
-                values["frequency_hz"] = round(pct_to_hz(command.reference_pct, nominal), 6)
-        if command.parameter is not None:
-            values["parameter"] = command.parameter
-            if command.index:
-                values["index"] = command.index
-        if command.value is not None:
-            values["value"] = command.value
-        if result.value is not None:
-            values["read_value"] = result.value.value
-        return values
 
     def defer(self, call: Callable[[], None]) -> None:
         """Tell the observer later (:meth:`flush`): after the next request is written."""

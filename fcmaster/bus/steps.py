@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan
 from fcmaster.protocol.codec import Exchange, ParameterKey
-from fcmaster.protocol.drive import ControlIntent
+from fcmaster.protocol.drive import ControlIntent, Motion
 
 
 class StepKind(enum.Enum):
@@ -63,6 +63,15 @@ class DriveSlot:
     ramp_up_s: float | None = None  # the drive's acceleration time, once read
     ramp_down_s: float | None = None  # its deceleration time, once read
     ramps_asked: bool = False  # the ramp reads are queued for this time online
+    at_reference: bool | None = None  # as the last status said; None: not known yet
+    # Adoption of a drive found running off its reference: what it executes was asked
+    # (FC 16-00), and once read, the stop it executes (None: motion).
+    executed_asked: bool = False
+    executed_known: bool = False
+    executed: Motion | None = None
+    # The last output read was below the one before; None: fewer than two read yet.
+    output_falling: bool | None = None
+    adopted: ControlIntent | None = None  # the intent adoption set, while it is the intent
 
     @property
     def name(self) -> str:

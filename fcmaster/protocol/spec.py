@@ -36,6 +36,7 @@ from types import ModuleType
 from typing import Any, Generic, TypeVar
 
 from fcmaster.protocol.codec import DriveCodec, ParameterKey
+from fcmaster.protocol.drive import Motion
 from fcmaster.protocol.watchdog import WatchdogFacts
 
 OptionsT = TypeVar("OptionsT")
@@ -135,6 +136,18 @@ class ParameterTables:
         )
 
 
+@dataclass(slots=True, frozen=True)
+class ExecutedControl:
+    """Where a drive tells the command it executes, so adoption can take over a stop.
+
+    A drive ramping down after a stop still reports itself running until its output
+    reaches 0 Hz; only what it executes says it is stopping, not running at a new speed.
+    """
+
+    parameter: str  # read by a poll (FC: 16-00 Control Word)
+    stopping: Callable[[int], Motion | None]  # its raw value → the stop it executes, or None
+
+
 # A frame → its fields, JSON-ready; ``from_drive``: a reply rather than a request.
 Describe = Callable[..., dict[str, Any]]
 
@@ -168,6 +181,9 @@ class ProtocolSpec(Generic[OptionsT]):
     # Acceleration and deceleration times a poll can read (confirmation deadlines of stops);
     # None where reading them needs more than a poll.
     ramp_parameters: tuple[str, str] | None = None
+    # What a drive found running but not at its reference executes (a stop it ramps down
+    # on, or motion); None where a poll cannot read it.
+    executed_control: ExecutedControl | None = None
     diagnosis: DiagnosisParameters
     simulator: str  # "module:attribute" of its SimProtocol in the sim layer (see above)
     link_type: int  # its pcapng link type in captures (a private USER type, 147-162)

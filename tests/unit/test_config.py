@@ -140,6 +140,12 @@ BAD = [
         "less than or equal to 0.5",
     ),
     (
+        "a shutdown that would never end",
+        _drive_line("      - {name: a, address: 1}") + "shutdown_timeout_s: 0\n",
+        "shutdown_timeout_s",
+        "greater than 0",
+    ),
+    (
         "no buses at all",
         "http: {listen: 127.0.0.1:8080}\n",
         "buses",

@@ -88,6 +88,27 @@ def control_word(intent: ControlIntent) -> int:
     return int(word)
 
 
+def executed_motion(word: int) -> Motion | None:
+    """The motion a drive executes by its last valid control word (16-00), if it is a stop.
+
+    Read when a drive found running is not at its reference (status bit 8 = 0): it may be
+    ramping down after a stop, with bit 11 still set while the output is above 0 Hz, and
+    only the word it executes tells that from a change of speed. None: the word commands
+    motion, or no valid word (bit 10 = 0) is there to say.
+    """
+    if not word & ControlWord.DATA_VALID:
+        return None
+    if not word & ControlWord.NO_COAST:
+        return Motion.COAST
+    if not word & ControlWord.NO_DC_BRAKE:  # DC braking, then stopped: a stop, not a coast
+        return Motion.STOP
+    if not word & ControlWord.NO_QUICK_STOP:
+        return Motion.QUICK_STOP
+    if not word & (ControlWord.START | ControlWord.JOG):
+        return Motion.STOP
+    return None
+
+
 def encode_reference(percent: float) -> int:
     """Return the 16-bit MRV for ``percent`` (0x4000 = 100 %, two's complement)."""
     if not REFERENCE_MIN_PCT <= percent <= REFERENCE_MAX_PCT:

@@ -10,11 +10,12 @@ from fcmaster.protocol.codec import DriveCodec
 from fcmaster.protocol.danfoss_fc import parameters
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
 from fcmaster.protocol.danfoss_fc.describe import describe_telegram
-from fcmaster.protocol.danfoss_fc.profile import StatusWord
+from fcmaster.protocol.danfoss_fc.profile import StatusWord, executed_motion
 from fcmaster.protocol.danfoss_fc.telegram import AddressFormat
 from fcmaster.protocol.danfoss_fc.watchdog import WATCHDOG
 from fcmaster.protocol.spec import (
     DiagnosisParameters,
+    ExecutedControl,
     LineKey,
     ParameterTables,
     ProtocolSpec,
@@ -56,6 +57,7 @@ SPEC: Final[ProtocolSpec[FcOptions]] = ProtocolSpec(
     describe=describe_telegram,
     checksum_key="bcc_ok",
     ramp_parameters=("3-41", "3-42"),
+    executed_control=ExecutedControl("16-00", executed_motion),
     diagnosis=DiagnosisParameters(
         address="8-31", baudrate="8-32", parity="8-33", delay="8-35", factory_delay_s=0.010
     ),

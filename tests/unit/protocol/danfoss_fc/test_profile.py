@@ -17,7 +17,7 @@ from fcmaster.protocol.danfoss_fc import (
     decode_reference,
     encode_reference,
 )
-from fcmaster.protocol.danfoss_fc.profile import flag_names
+from fcmaster.protocol.danfoss_fc.profile import executed_motion, flag_names
 from fcmaster.protocol.drive import ControlIntent, Motion
 
 # ---------------------------------------------------------------- control word (§8.1, §8.3)
@@ -208,3 +208,33 @@ def test_every_percentage_survives_encode_then_decode_within_half_a_step(percent
     raw = encode_reference(percent)
     assert 0 <= raw <= 0xFFFF
     assert abs(decode_reference(raw) - percent) <= 100 / 16384 / 2 + 1e-12
+
+
+@pytest.mark.parametrize(
+    ("word", "stopping"),
+    [
+        (0x043C, Motion.STOP),  # ramp stop (§8.3)
+        (0x0474, Motion.COAST),
+        (0x046C, Motion.QUICK_STOP),
+        (0x0478, Motion.STOP),  # DC brake, then stopped
+        (0x0400, Motion.COAST),  # every stop at once: the output is off
+        (0x047C, None),  # start: motion
+        (0x847C, None),
+        (0x057C, None),  # jog
+        (0x045C, None),  # freeze: holds its output
+        (0x0000, None),  # no valid word: nothing to say
+        (0x003C, None),
+    ],
+)
+def test_executed_motion_names_the_stop_a_valid_word_commands(
+    word: int, stopping: Motion | None
+) -> None:
+    assert executed_motion(word) is stopping
+
+
+@pytest.mark.parametrize("intent", [ControlIntent(m) for m in Motion])
+def test_executed_motion_reads_back_each_word_the_master_sends(intent: ControlIntent) -> None:
+    stopping = (
+        intent.motion if intent.motion in (Motion.STOP, Motion.COAST, Motion.QUICK_STOP) else None
+    )
+    assert executed_motion(control_word(intent)) is stopping
