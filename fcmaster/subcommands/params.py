@@ -220,7 +220,7 @@ async def restore(
         )
     codec = codec_for(options.plan())
     _check_address(codec, address)
-    configured = None if config is None else _configured(config, options.port, address)
+    configured = None if config is None else _configured(config, options, address)
 
     def encode(key: str, value: float) -> object:  # built, never sent: the judge's measure
         return codec.write(address, codec.parameter(key), 0, value, None, persist=persist)
@@ -271,14 +271,19 @@ async def restore(
     return 0 if report.failed == 0 else 1
 
 
-def _configured(config: Path, port: str, address: int) -> DrivePlan:
-    """The drive at ``address`` on ``config``'s bus at ``port`` (links followed)."""
+def _configured(config: Path, options: LineOptions, address: int) -> DrivePlan:
+    """The drive at ``address`` on ``config``'s bus at the port (links followed)."""
     from fcmaster.config import load as load_config  # pydantic: only when a config is named
 
-    lines = load_config(config, buses_only=True).lines
+    port = options.port
     real = os.path.realpath(port)
-    for plan in lines:
+    for plan in load_config(config, buses_only=True).lines:
         if plan.port == port or ("://" not in plan.port and os.path.realpath(plan.port) == real):
+            if plan.protocol != options.protocol:
+                raise UsageError(
+                    f"bus {plan.name} in {config} is {plan.protocol}; the line is "
+                    f"{options.protocol} (--protocol)"
+                )
             for drive in plan.drives:
                 if drive.address == address:
                     return drive

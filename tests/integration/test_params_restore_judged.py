@@ -17,6 +17,7 @@ import yaml
 
 from fcmaster.protocol.danfoss_fc.telegram import RequestAk, decode_telegram
 from fcmaster.protocol.mitsubishi.message import Request, decode_frame
+from fcmaster.protocol.parameter_set import ParameterSet
 from fcmaster.sim import DriveSettings, PtyServer
 from fcmaster.sim.danfoss_fc import FcSimDrive
 from fcmaster.sim.mitsubishi import MitsubishiSimDrive
@@ -245,3 +246,24 @@ async def test_the_help_says_what_force_may_override_and_what_it_never_may() -> 
     assert "ceilings above the configured max_frequency_hz" in text
     assert "never anything outside the set (a factory reset, the operation mode)" in text
     assert "Nothing is written (exit 2)" in text
+
+
+async def test_a_config_without_that_drive_or_of_another_protocol_is_refused(
+    tmp_path: Path,
+) -> None:
+    backup = tmp_path / "drive1.yaml"
+    backup.write_text(yaml.safe_dump(ParameterSet(protocol="danfoss-fc", address=1).to_dict()))
+    port = str(tmp_path / "ttyUSB9")  # never opened: the file is judged first
+    plant = config_file(tmp_path, port, "danfoss-fc", 2, 50)
+    restore = ("params", "restore", "--port", port, "--config", str(plant), str(backup))
+    code, _, err = await _fcmaster(*restore, "--address", "1")
+    assert code == 2
+    assert f"bus line1 in {plant} has no drive at address 1" in err
+    code, _, err = await _fcmaster(*restore, "--address", "2", "--port", "/dev/ttyUSB7")
+    assert code == 2
+    assert f"no bus in {plant} is at /dev/ttyUSB7" in err
+    plant = config_file(tmp_path, port, "mitsubishi", 2, 50)
+    code, _, err = await _fcmaster(*restore, "--address", "2")
+    assert code == 2
+    assert "bus line1 in" in err
+    assert "is mitsubishi; the line is danfoss-fc (--protocol)" in err
