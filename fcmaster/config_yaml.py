@@ -32,14 +32,6 @@ _ONCE: Final = "a key may appear once in a mapping (YAML would silently keep the
 Problem = tuple[str, str]
 
 
-class _Refused(Exception):
-    """A document that cannot be read any further (too deep)."""
-
-    def __init__(self, problem: Problem) -> None:
-        super().__init__(problem[1])
-        self.problem = problem
-
-
 def _line(mark: Any) -> str:
     return f"line {mark.line + 1}"
 
@@ -59,9 +51,9 @@ class _Loader(yaml.SafeLoader):
         if isinstance(event, yaml.AliasEvent):
             self.aliases.append(event.start_mark)
         elif self.depth >= MAX_DEPTH:
-            raise _Refused(
-                (_line(event.start_mark), f"nested deeper than {MAX_DEPTH} levels; a config "
-                 "needs far fewer")
+            raise ConfigError(
+                [(_line(event.start_mark), f"nested deeper than {MAX_DEPTH} levels; a config "
+                  "needs far fewer")]
             )  # fmt: skip
         self.depth += 1
         try:
@@ -87,8 +79,6 @@ def read(text: str, problems: list[Problem]) -> Any:
             raise ConfigError(refused)
         problems.extend(_duplicates(node, loader))
         return loader.construct_document(node)
-    except _Refused as exc:
-        raise ConfigError([exc.problem]) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "YAML"
