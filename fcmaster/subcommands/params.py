@@ -232,7 +232,7 @@ async def restore(
         lines += [f"  {line} (--force writes it anyway)" for line in verdict.beyond_limits]
         raise UsageError(f"{path} is refused; nothing was written:\n" + "\n".join(lines))
     for line in verdict.beyond_limits:
-        print(f"{line}: written as --force says", file=sys.stderr)
+        print(f"{line}: allowed by --force", file=sys.stderr)
     async with _Session(options.plan()) as session:
         drive = _Drive(session, address)
         current = await _read_drive(drive, profile)

@@ -170,7 +170,7 @@ async def test_fc_a_limit_above_the_configured_maximum_is_written_only_when_forc
         with recorded(server, drive) as wire:
             code, out, err = await params(server, fc, *restore, "--force", str(backup))
         assert code == 0, err + out
-        assert "written as --force says" in err
+        assert "max_frequency_hz 50: allowed by --force" in err
         assert fc_writes(wire) == [(414, 5000)]  # that one write, and nothing else
         assert drive.parameters[414] == 5000
 
