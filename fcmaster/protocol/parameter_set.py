@@ -45,6 +45,7 @@ class SetProfile:
     changeable_while_running: frozenset[str]  # known from the manuals; all others: stopped
     link_settings: frozenset[str]  # address, baud, parity, protocol: never restored
     frequency_ceilings: frozenset[str] = frozenset()  # Hz settings capping the output
+    ranges: tuple[tuple[str, float, float], ...] = ()  # (parameter, low, high) in its unit
 
 
 def profile_for(protocol: str) -> SetProfile:
@@ -61,6 +62,7 @@ def profile_for(protocol: str) -> SetProfile:
         changeable_while_running=tables.changeable_while_running,
         link_settings=tables.link_settings,
         frequency_ceilings=tables.frequency_ceilings,
+        ranges=tables.ranges,
     )
 
 
@@ -276,11 +278,13 @@ def judge(
     """Every parameter of ``saved`` judged as a restore would write it.
 
     ``encode`` builds the write of a value without sending it and raises UsageError for one
-    the parameter cannot take (beyond its type's range, below zero, not finite). A line
+    the parameter cannot take (beyond its type's range, below zero, not finite); a value
+    outside the range the manual gives (``SetProfile.ranges``) is refused too. A line
     setting or an entry the drive refused to read is never written, so only its membership
     is judged. ``max_frequency_hz``: the drive's configured limit, when known.
     """
     members = dict(profile.members)
+    ranges = {key: (low, high) for key, low, high in profile.ranges}
     refused: list[str] = []
     beyond: list[str] = []
     for key, entry in saved.parameters.items():
@@ -298,6 +302,11 @@ def judge(
             encode(key, entry.value)
         except UsageError as exc:
             refused.append(f"{label} = {entry.shown()}: cannot be written ({exc})")
+            continue
+        low, high = ranges.get(key, (-math.inf, math.inf))
+        if not low <= entry.value <= high:
+            refused.append(f"{label} = {entry.shown()}: outside {low:g}-{high:g} "
+                           f"{entry.unit}".rstrip())  # fmt: skip
             continue
         ceiling = max_frequency_hz
         if ceiling is not None and key in profile.frequency_ceilings and entry.value > ceiling:

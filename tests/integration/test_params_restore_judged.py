@@ -26,13 +26,22 @@ from tests.integration.test_params_commission import (
     FC_LINE,
     MITSUBISHI_LINE,
     _fcmaster,
-    params,
     saved,
     sim_drive,
 )
+from tests.integration.test_params_commission import params as _params
 
 FC_WRITES = {RequestAk.WRITE_WORD, RequestAk.WRITE_DWORD, RequestAk.WRITE_WORD_EEPROM,
              RequestAk.WRITE_DWORD_EEPROM}  # fmt: skip
+
+
+async def params(server: PtyServer, protocol: str, verb: str, *args: str) -> tuple[int, str, str]:
+    """``fcmaster params VERB`` on ``server``, with a reply deadline a busy machine keeps.
+
+    What these tests judge is what is written, not how fast the drive answers: a reply the
+    loaded test machine delivers late must not fail a backup.
+    """
+    return await _params(server, protocol, verb, "--timeout", "2", *args)
 
 
 @dataclass
@@ -133,14 +142,16 @@ async def test_fc_a_bad_value_anywhere_is_refused_before_a_good_one_is_written(
         data = saved(backup)
         data["parameters"]["4-14"].update(value=45.0, raw=450)  # earlier in the file: fine
         data["parameters"]["8-03"].update(value=-5.0, raw=-50)
+        data["parameters"]["3-81"].update(value=0.0, raw=0)  # below the guide's 0.01 s
         backup.write_text(yaml.safe_dump(data, sort_keys=False))
         drive = sim_drive(server, 1, FcSimDrive)
         with recorded(server, drive) as wire:
             code, out, err = await params(server, fc, "restore", "--address", "1", str(backup))
         assert code == 2, err + out
         assert "8-03 (Control Word Timeout Time) = -5 s: cannot be written" in err
+        assert "3-81 (Quick Stop Ramp Time) = 0 s: outside 0.01-3600 s" in err  # both at once
         assert bytes(wire.sent) == b""
-        assert (drive.parameters[414], drive.parameters[803]) == (650, 10)
+        assert [drive.parameters[pnu] for pnu in (414, 803, 381)] == [650, 10, 300]
 
 
 async def test_fc_a_limit_above_the_configured_maximum_is_written_only_when_forced(

@@ -126,6 +126,8 @@ def test_the_sets_hold_no_factory_reset_and_operation_modes_are_line_settings() 
     mitsubishi = profile_for("mitsubishi")
     assert "Pr.79" in mitsubishi.link_settings  # operation mode: never restored
     assert mitsubishi.frequency_ceilings == {"Pr.1", "Pr.18"}
+    ranged = {key for key, _, _ in fc.ranges}
+    assert ranged == {"3-41", "3-42", "3-51", "3-52", "3-81", "8-03"} <= set(dict(fc.members))
 
 
 def test_judge_refuses_what_is_outside_the_set_or_cannot_be_sent_and_bounds_ceilings() -> None:
@@ -136,6 +138,8 @@ def test_judge_refuses_what_is_outside_the_set_or_cannot_be_sent_and_bounds_ceil
     saved.parameters["4-14"] = Entry(value=500.0, unit="Hz")
     saved.parameters["8-31"] = Entry(value=-1.0)  # a line setting: never written, not judged
     saved.parameters["3-41"] = Entry(value="fast")
+    saved.parameters["3-42"] = Entry(value=0.0, unit="s")  # sendable, but below 0.01 s
+    saved.parameters["3-81"] = Entry(value=0.01, unit="s")  # the guide's least: fine
     verdict = judge(fc, saved, _fc_encode, max_frequency_hz=50.0)
     assert verdict.refused == (
         "14-22 (Operation Mode): not in the danfoss-fc parameter set, and a restore writes only "
@@ -143,6 +147,7 @@ def test_judge_refuses_what_is_outside_the_set_or_cannot_be_sent_and_bounds_ceil
         "8-03 (Control Word Timeout Time) = -5 s: cannot be written (8-03: raw value -50 is "
         "outside 0…4294967295)",
         "3-41 (Ramp 1 Ramp Up Time): 'fast' is not a number",
+        "3-42 (Ramp 1 Ramp Down Time) = 0 s: outside 0.01-3600 s",
     )
     assert verdict.beyond_limits == (
         "4-14 (Motor Speed High Limit [Hz]) = 500 Hz is above the drive's configured "
@@ -155,9 +160,9 @@ def test_judge_refuses_what_is_outside_the_set_or_cannot_be_sent_and_bounds_ceil
 def test_judge_refuses_exactly_the_values_the_codec_cannot_send(value: float) -> None:
     fc = profile_for("danfoss-fc")
     saved = ParameterSet(protocol="danfoss-fc", address=1)
-    saved.parameters["3-42"] = Entry(value=value, unit="s")
+    saved.parameters["4-12"] = Entry(value=value, unit="Hz")  # no range of its own
     try:
-        _fc_encode("3-42", value)
+        _fc_encode("4-12", value)
     except UsageError:
         sendable = False
     else:
