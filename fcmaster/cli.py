@@ -209,7 +209,12 @@ def _cmd_params(args: argparse.Namespace) -> int:
         return _run_async(params.diff(options, args.address, args.files))
     return _run_async(
         params.restore(
-            _options(args), args.address, args.file, force=args.force, persist=not args.ram_only
+            _options(args),
+            args.address,
+            args.file,
+            force=args.force,
+            persist=not args.ram_only,
+            config=args.config,
         )
     )
 

@@ -354,16 +354,27 @@ def _params_parser(commands: Any, protocols: bool) -> None:
     restore = verbs.add_parser(
         "restore",
         help="write a saved set back, verifying each value",
-        description="Write the parameters that differ from FILE, each read back to verify. "
-        "While the drive runs, only parameters known to be changeable in operation are "
-        "written; line settings (address, baud, parity, protocol) are left alone. Exit 0 "
-        "when every other difference was written and verified, 1 otherwise.",
+        description="Judge the whole FILE first, then write the parameters that differ, each "
+        "read back to verify. Nothing is written (exit 2) when FILE holds a parameter outside "
+        "the protocol's set or a value its parameter cannot take, or a frequency ceiling (FC "
+        "4-14, Mitsubishi Pr.1/Pr.18) above the drive's max_frequency_hz in --config. While "
+        "the drive runs, only parameters known to be changeable in operation are written; "
+        "line settings (address, baud, parity, protocol, operation mode) are left alone. Exit "
+        "0 when every other difference was written and verified, 1 otherwise.",
     )
     _line_options(restore, protocols)
     restore.add_argument("--address", type=int, required=True)
     restore.add_argument(
-        "--force", action="store_true", help="restore a set saved from another drive type"
-    )
+        "--config", type=Path,
+        help="judge the frequency ceilings against this drive's configured max_frequency_hz "
+        "(the drive at --address on the bus at --port)",
+    )  # fmt: skip
+    restore.add_argument(
+        "--force", action="store_true",
+        help="restore a set saved from another drive type, and ceilings above the configured "
+        "max_frequency_hz; never anything outside the set (a factory reset, the operation "
+        "mode), a value its parameter cannot take, or a line setting",
+    )  # fmt: skip
     restore.add_argument(
         "--ram-only", action="store_true", help="not to non-volatile memory (lost at power-off)"
     )

@@ -4,7 +4,8 @@ Loading happens in three passes, and every pass reports *every* problem it finds
 ``(key path, reason)`` pair such as ``("buses[0].drives[3].address", "131 is outside
 1-126")``, so a user fixes a file in one go:
 
-1. YAML syntax and ``${ENV_VAR}`` substitution (``${VAR:-default}`` gives a default);
+1. YAML syntax (no key given twice, nesting and aliases bounded: :func:`.config_yaml.read`)
+   and ``${ENV_VAR}`` substitution (``${VAR:-default}`` gives a default);
 2. structure: unknown keys, missing keys and wrong types (pydantic, ``extra="forbid"``);
 3. meaning: names and addresses unique, addresses in range for the protocol and format,
    monitor parameters that the protocol can address, limits that make sense.
@@ -29,7 +30,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-import yaml
 from pydantic import (
     BaseModel,
     Field,
@@ -43,7 +43,7 @@ from fcmaster.adapters.auth import listen_problem
 from fcmaster.adapters.settings import HttpSettings, ModbusSettings, MqttSettings
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
-from fcmaster.config_hints import in_words, yaml_problem
+from fcmaster.config_hints import in_words
 from fcmaster.config_modbus import check_modbus, modbus_units
 from fcmaster.config_sections import (
     HttpModel,
@@ -57,7 +57,7 @@ from fcmaster.config_sections import (
 from fcmaster.config_sections import StrictModel as _Model
 from fcmaster.config_values import baudrate_problem, check_name, port_url_problem
 from fcmaster.config_watchdog import WatchdogModel, watchdog_plan, watchdogs_outlast_round
-from fcmaster.config_yaml import substitute
+from fcmaster.config_yaml import read, substitute
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.protocol.registry import DEFAULT, NAMES, line_keys, spec_for
 from fcmaster.protocol.spec import LineKey
@@ -245,12 +245,10 @@ def parse(
     buses_only: bool = False,
 ) -> Config:
     """Validate config text (see :func:`load`)."""
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError([yaml_problem(exc)]) from exc
+    twice: list[tuple[str, str]] = []  # keys given twice: reported with the rest
+    data = read(text, twice)
     if not isinstance(data, dict):
-        raise ConfigError([("(top)", "the file must be a mapping with a 'buses' list")])
+        raise ConfigError([*twice, ("(top)", "the file must be a mapping with a 'buses' list")])
     unset: list[tuple[str, str]] = []
     data = substitute(data, "", os.environ if env is None else env, unset)
     problems: list[tuple[str, str]] = []
@@ -274,6 +272,7 @@ def parse(
     if unset:  # what an unset variable left empty is not a problem of its own
         blank = {where for where, _ in unset}
         problems = unset + [(where, why) for where, why in problems if where not in blank]
+    problems = twice + problems
     if problems:
         raise ConfigError(problems)
     return Config(lines=lines, model=model, path=path)
@@ -335,12 +334,12 @@ def _valid(model: type[BaseModel], value: Any) -> bool:
 
 def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePlan, ...]:
     lines: list[LinePlan] = []
-    drive_names: dict[str, str] = {}
-    bus_names: dict[str, str] = {}
+    drive_names: dict[str, tuple[str, str]] = {}
+    bus_names: dict[str, tuple[str, str]] = {}
     ports: dict[str, str] = {}
     for b, bus in enumerate(model.buses):
         where = f"buses[{b}]"
-        _unique(bus_names, bus.name, f"{where}.name", "bus name", problems)
+        _unique_name(bus_names, bus.name, f"{where}.name", "bus name", problems)
         _unique(ports, bus.port, f"{where}.port", "port", problems)
         port_problem = port_url_problem(bus.port)
         if port_problem:
@@ -353,7 +352,7 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
         drives: list[DrivePlan] = []
         for d, drive in enumerate(bus.drives):
             at = f"{where}.drives[{d}]"
-            _unique(drive_names, drive.name, f"{at}.name", "drive name", problems)
+            _unique_name(drive_names, drive.name, f"{at}.name", "drive name", problems)
             if drive.address not in codec.addresses:
                 problems.append((f"{at}.address", spec.bad_address(bus, drive.address)))
             else:
@@ -481,6 +480,29 @@ def _unique(
         problems.append((path, f"{what} {value!r} is already used at {seen[value]}"))
     else:
         seen[value] = path
+
+
+def _unique_name(
+    seen: dict[str, tuple[str, str]],
+    name: str,
+    path: str,
+    what: str,
+    problems: list[tuple[str, str]],
+) -> None:
+    """As :func:`_unique`, for names, where ``Pump1`` and ``pump1`` are the same name.
+
+    A dashboard, a PLC tag list or a case-insensitive broker ACL would mix them up, and a
+    command meant for one could reach the other.
+    """
+    key = name.casefold()
+    if key not in seen:
+        seen[key] = (name, path)
+        return
+    first, at = seen[key]
+    if first == name:
+        problems.append((path, f"{what} {name!r} is already used at {at}"))
+    else:
+        problems.append((path, f"{what} {name!r} differs only in case from {first!r} at {at}"))
 
 
 def _foreign_keys(bus: BusModel, where: str) -> list[tuple[str, str]]:

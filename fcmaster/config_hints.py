@@ -1,8 +1,7 @@
-"""Config problems in words: YAML syntax errors without parser jargon, and 'did you mean'.
+"""Config problems in words: no secret shown, and 'did you mean'.
 
-PyYAML says where it stopped and what its grammar expected there (``expected <block end>,
-but found '<block mapping start>'``); a user needs what to change in the file. A misspelled
-key or choice gets the nearest known one.
+A misspelled key or choice gets the nearest known one; a problem with a secret never shows
+its value. (YAML syntax errors in words: :func:`fcmaster.config_yaml.yaml_problem`.)
 """
 
 from __future__ import annotations
@@ -12,42 +11,10 @@ import types
 import typing
 from typing import Any
 
-import yaml
 from pydantic import BaseModel
 
 from fcmaster.config_yaml import describe_error
 from fcmaster.suggest import did_you_mean
-
-_INDENT = "the indentation does not line up: keys of one mapping start in the same column"
-# (what PyYAML's problem text contains, what it means in the file)
-_IN_WORDS: tuple[tuple[str, str], ...] = (
-    ("expected <block end>", _INDENT),
-    ("did not find expected key", _INDENT),
-    ("did not find expected '-' indicator", "a list item is indented unlike the ones above it"),
-    ("'\\t' that cannot start any token", "a tab character: indent with spaces only"),
-    ("found unexpected end of stream", "a quote that opens here is never closed"),
-    ("could not find expected ':'", "a line that is not 'key: value' (is a ':' missing?)"),
-    ("expected ',' or ']'", "a list opened with '[' is not closed with ']'"),
-    ("expected ',' or '}'", "a mapping opened with '{' is not closed with '}'"),
-    (
-        "mapping values are not allowed here",
-        "a second ':' on one line: put quotes around a value that contains ': ', or "
-        "start the key on a line of its own",
-    ),
-    ("found undefined alias", "*NAME refers to an anchor &NAME that is not defined above it"),
-)
-
-
-def yaml_problem(exc: yaml.YAMLError) -> tuple[str, str]:
-    """``(where, what)`` of a YAML syntax error: line and column, and the mistake in words."""
-    problem = str(getattr(exc, "problem", None) or exc)
-    mark = getattr(exc, "problem_mark", None)
-    words = next((w for jargon, w in _IN_WORDS if jargon in problem), "")
-    if "stream" in problem and getattr(exc, "context_mark", None) is not None:
-        mark = exc.context_mark  # type: ignore[attr-defined] # where the quote or bracket opened
-    where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"
-    return where, f"not valid YAML: {words or problem}"
-
 
 # Keys whose values are secrets: a problem with one never shows the value (it would reach
 # a terminal, a log and the journal).

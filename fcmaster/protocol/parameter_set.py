@@ -44,6 +44,8 @@ class SetProfile:
     identity_match: frozenset[str]  # identity entries a restore insists on (type, model)
     changeable_while_running: frozenset[str]  # known from the manuals; all others: stopped
     link_settings: frozenset[str]  # address, baud, parity, protocol: never restored
+    frequency_ceilings: frozenset[str] = frozenset()  # Hz settings capping the output
+    ranges: tuple[tuple[str, float, float], ...] = ()  # (parameter, low, high) in its unit
 
 
 def profile_for(protocol: str) -> SetProfile:
@@ -59,6 +61,8 @@ def profile_for(protocol: str) -> SetProfile:
         identity_match=tables.identity_match,
         changeable_while_running=tables.changeable_while_running,
         link_settings=tables.link_settings,
+        frequency_ceilings=tables.frequency_ceilings,
+        ranges=tables.ranges,
     )
 
 
@@ -248,6 +252,67 @@ def identity_mismatches(profile: SetProfile, saved: ParameterSet, drive: Paramet
         if a is not None and b is not None and not a.same_as(b):
             out.append(f"{key} ({a.name}): the file says {a.shown()}, the drive {b.shown()}")
     return out
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class Verdict:
+    """A restore's file judged as a whole, before anything is written.
+
+    ``refused``: what no restore writes, forced or not (a parameter outside the set, such as
+    FC 14-22 Operation Mode, whose "initialise" resets the drive at its next power-up; a
+    value that cannot be sent). ``beyond_limits``: a frequency ceiling above the drive's
+    configured ``max_frequency_hz``, written only when forced.
+    """
+
+    refused: tuple[str, ...] = ()
+    beyond_limits: tuple[str, ...] = ()
+
+
+def judge(
+    profile: SetProfile,
+    saved: ParameterSet,
+    encode: Callable[[str, float], object],
+    *,
+    max_frequency_hz: float | None = None,
+) -> Verdict:
+    """Every parameter of ``saved`` judged as a restore would write it.
+
+    ``encode`` builds the write of a value without sending it and raises UsageError for one
+    the parameter cannot take (beyond its type's range, below zero, not finite); a value
+    outside the range the manual gives (``SetProfile.ranges``) is refused too. A line
+    setting or an entry the drive refused to read is never written, so only its membership
+    is judged. ``max_frequency_hz``: the drive's configured limit, when known.
+    """
+    members = dict(profile.members)
+    ranges = {key: (low, high) for key, low, high in profile.ranges}
+    refused: list[str] = []
+    beyond: list[str] = []
+    for key, entry in saved.parameters.items():
+        label = f"{key} ({members.get(key) or entry.name or 'unnamed'})"
+        if key not in members:
+            refused.append(f"{label}: not in the {profile.protocol} parameter set, and a "
+                           "restore writes only the set's own parameters")  # fmt: skip
+            continue
+        if entry.refused is not None or key in profile.link_settings:
+            continue
+        if not isinstance(entry.value, float):
+            refused.append(f"{label}: {entry.value!r} is not a number")
+            continue
+        try:
+            encode(key, entry.value)
+        except UsageError as exc:
+            refused.append(f"{label} = {entry.shown()}: cannot be written ({exc})")
+            continue
+        low, high = ranges.get(key, (-math.inf, math.inf))
+        if not low <= entry.value <= high:
+            refused.append(f"{label} = {entry.shown()}: outside {low:g}-{high:g} "
+                           f"{entry.unit}".rstrip())  # fmt: skip
+            continue
+        ceiling = max_frequency_hz
+        if ceiling is not None and key in profile.frequency_ceilings and entry.value > ceiling:
+            beyond.append(f"{label} = {entry.shown()} is above the drive's configured "
+                          f"max_frequency_hz {ceiling:g}")  # fmt: skip
+    return Verdict(refused=tuple(refused), beyond_limits=tuple(beyond))
 
 
 Reader = Callable[[str], Awaitable[ParameterValue | DriveError]]

@@ -122,6 +122,12 @@ class ParameterTables:
     changeable_while_running: frozenset[str]  # known from the manuals; all others: stopped
     link_settings: frozenset[str]  # address, baud, parity, protocol: never restored
     unit_of: Callable[[ParameterKey], str]  # the unit its values come in, as read
+    # Hz settings that cap the output frequency: a restore keeps them within the drive's
+    # configured max_frequency_hz unless forced.
+    frequency_ceilings: frozenset[str] = frozenset()
+    # (low, high) in the parameter's unit, from the manuals, where a restore should know a
+    # drive's range before it writes (the drive would refuse the value mid-restore).
+    ranges: tuple[tuple[str, float, float], ...] = ()
 
     @classmethod
     def of(cls, tables: ModuleType, unit_of: Callable[[ParameterKey], str]) -> ParameterTables:
@@ -133,6 +139,8 @@ class ParameterTables:
             changeable_while_running=tables.CHANGEABLE_WHILE_RUNNING,
             link_settings=tables.LINK_SETTINGS,
             unit_of=unit_of,
+            frequency_ceilings=tables.FREQUENCY_CEILINGS,
+            ranges=tables.SET_RANGES,
         )
 
 

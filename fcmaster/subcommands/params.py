@@ -3,12 +3,15 @@
 The set's members, identity and the rules of what may be written while the motor turns come
 from :mod:`fcmaster.protocol.parameter_set`; this module opens the port (as the other
 commissioning commands do), reads and writes one parameter at a time, and talks to the user.
-A restore reads the drive first, writes only what differs, reads each written value back,
-and never writes a parameter that needs the motor stopped while the drive reports running.
+A restore judges the whole file before it opens the port (only the set's own parameters,
+values each parameter can take, frequency ceilings within the drive's configured limit), then
+reads the drive, writes only what differs, reads each written value back, and never writes a
+parameter that needs the motor stopped while the drive reports running.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Sequence
 from datetime import UTC, datetime
@@ -16,7 +19,10 @@ from pathlib import Path
 
 import yaml
 
-from fcmaster.errors import BusError, UsageError
+from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.plan import DrivePlan
+from fcmaster.config_yaml import read
+from fcmaster.errors import BusError, ConfigError, UsageError
 from fcmaster.protocol.codec import DriveError, Exchange, ParameterValue, Reply
 from fcmaster.protocol.parameter_set import (
     Difference,
@@ -25,6 +31,7 @@ from fcmaster.protocol.parameter_set import (
     SetProfile,
     compare,
     identity_mismatches,
+    judge,
     profile_for,
     read_set,
 )
@@ -105,12 +112,23 @@ async def _read_drive(drive: _Drive, profile: SetProfile) -> ParameterSet:
 def load(path: Path) -> ParameterSet:
     """A set from a YAML file; UsageError if it cannot be read or is not a set."""
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise UsageError(f"cannot read {path}: {exc.strerror}") from None
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
         raise UsageError(f"{path} is not YAML: {exc}") from None
+    twice: list[tuple[str, str]] = []  # a parameter given twice: which value was meant?
+    try:
+        data = read(text, twice)
+    except ConfigError as exc:
+        raise UsageError(f"{path} is not YAML: {_problems(exc.problems)}") from None
+    if twice:
+        raise UsageError(f"{path} is not a valid parameter set: {_problems(twice)}")
     return ParameterSet.from_dict(data, source=str(path))
+
+
+def _problems(problems: list[tuple[str, str]]) -> str:
+    return "; ".join(f"{where}: {reason}" for where, reason in problems)
 
 
 def dump(found: ParameterSet) -> str:
@@ -180,15 +198,41 @@ async def diff(options: LineOptions | None, address: int | None, files: list[Pat
 
 
 async def restore(
-    options: LineOptions, address: int, path: Path, *, force: bool, persist: bool
+    options: LineOptions,
+    address: int,
+    path: Path,
+    *,
+    force: bool,
+    persist: bool,
+    config: Path | None = None,
 ) -> int:
-    """Write what differs from the file, verify each by reading back; 0 when all done."""
+    """Judge the whole file, then write what differs, each verified by reading back.
+
+    0 when all was written. Nothing reaches the line (the port is not even opened) when the
+    file holds a parameter outside the set or a value its parameter cannot take, or, unless
+    ``force``, a frequency ceiling above the drive's ``max_frequency_hz`` in ``config``.
+    """
     saved = load(path)
     profile = profile_for(options.protocol)
     if saved.protocol != options.protocol:
         raise UsageError(
             f"{path} is a {saved.protocol} set; the line is {options.protocol} (--protocol)"
         )
+    codec = codec_for(options.plan())
+    _check_address(codec, address)
+    configured = None if config is None else _configured(config, options, address)
+
+    def encode(key: str, value: float) -> object:  # built, never sent: the judge's measure
+        return codec.write(address, codec.parameter(key), 0, value, None, persist=persist)
+
+    ceiling = None if configured is None else configured.max_frequency_hz
+    verdict = judge(profile, saved, encode, max_frequency_hz=ceiling)
+    if verdict.refused or (verdict.beyond_limits and not force):
+        lines = [f"  {line} (--force does not change this)" for line in verdict.refused]
+        lines += [f"  {line} (--force writes it anyway)" for line in verdict.beyond_limits]
+        raise UsageError(f"{path} is refused; nothing was written:\n" + "\n".join(lines))
+    for line in verdict.beyond_limits:
+        print(f"{line}: allowed by --force", file=sys.stderr)
     async with _Session(options.plan()) as session:
         drive = _Drive(session, address)
         current = await _read_drive(drive, profile)
@@ -225,6 +269,26 @@ async def restore(
         f"{len(saved.parameters) - len(wanted)} already equal or not restorable"
     )
     return 0 if report.failed == 0 else 1
+
+
+def _configured(config: Path, options: LineOptions, address: int) -> DrivePlan:
+    """The drive at ``address`` on ``config``'s bus at the port (links followed)."""
+    from fcmaster.config import load as load_config  # pydantic: only when a config is named
+
+    port = options.port
+    real = os.path.realpath(port)
+    for plan in load_config(config, buses_only=True).lines:
+        if plan.port == port or ("://" not in plan.port and os.path.realpath(plan.port) == real):
+            if plan.protocol != options.protocol:
+                raise UsageError(
+                    f"bus {plan.name} in {config} is {plan.protocol}; the line is "
+                    f"{options.protocol} (--protocol)"
+                )
+            for drive in plan.drives:
+                if drive.address == address:
+                    return drive
+            raise UsageError(f"bus {plan.name} in {config} has no drive at address {address}")
+    raise UsageError(f"no bus in {config} is at {port}")
 
 
 def _restorable(d: Difference) -> bool:

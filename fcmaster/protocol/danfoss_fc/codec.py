@@ -218,7 +218,10 @@ class FcCodec:
             raise UsageError(f"{parameter.name}: only numeric values can be written")
         if not -_INFINITY < value < _INFINITY:  # NaN too; round() would raise ValueError
             raise UsageError(f"{parameter.name}: {value} is not a number that can be written")
-        raw = spec.to_raw(value)
+        try:
+            raw = spec.to_raw(value)
+        except OverflowError:  # finite, but infinite once scaled (1e306 s in 0.01 s steps)
+            raise UsageError(f"{parameter.name}: {value:g} is far outside its range") from None
         pwe = spec.pwe_from_raw(raw)
         ak = spec.write_ak(raw, eeprom=persist)
         return (

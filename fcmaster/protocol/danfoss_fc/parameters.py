@@ -277,3 +277,12 @@ IDENTITY_MATCH: Final = frozenset({"15-40"})  # FC type: a set fits drives of it
 CHANGEABLE_WHILE_RUNNING: Final[frozenset[str]] = frozenset()
 # Protocol, address, baud rate, parity: a restore that changed them would lose the drive.
 LINK_SETTINGS: Final = frozenset({"8-30", "8-31", "8-32", "8-33"})
+# The set holds no factory reset or operation mode (14-22 "initialise" resets the drive at
+# its next power-up): a restore writes nothing outside the set.
+FREQUENCY_CEILINGS: Final = frozenset({"4-14"})  # Motor Speed High Limit [Hz]
+# Ranges of the programming guide (FC 301/302) that hold whatever the other settings are:
+# ramp times 0.01-3600 s, the control-word timeout 0.1-18000 s.
+SET_RANGES: Final = (
+    *((number, 0.01, 3600.0) for number in ("3-41", "3-42", "3-51", "3-52", "3-81")),
+    ("8-03", 0.1, 18000.0),
+)

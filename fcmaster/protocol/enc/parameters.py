@@ -215,3 +215,5 @@ IDENTITY_MATCH: Final[frozenset[str]] = frozenset()  # a version number says not
 # for the F0 codes, so none is taken as changeable while running.
 CHANGEABLE_WHILE_RUNNING: Final[frozenset[str]] = frozenset()
 LINK_SETTINGS: Final = frozenset({"F2.14", "F2.15", "F2.53"})  # baud/format, address, frames
+FREQUENCY_CEILINGS: Final[frozenset[str]] = frozenset()  # the table has no maximum frequency
+SET_RANGES: Final[tuple[tuple[str, float, float], ...]] = ()  # none taken from the manuals yet

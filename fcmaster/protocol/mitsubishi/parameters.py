@@ -229,3 +229,5 @@ CHANGEABLE_WHILE_RUNNING: Final[frozenset[str]] = frozenset()
 LINK_SETTINGS: Final = frozenset(
     f"Pr.{n}" for n in (79, 117, 118, 119, 120, 123, 124, 331, 332, 333, 334, 337, 341, 549)
 )
+FREQUENCY_CEILINGS: Final = frozenset({"Pr.1", "Pr.18"})  # maximum, high-speed maximum
+SET_RANGES: Final[tuple[tuple[str, float, float], ...]] = ()  # none taken from the manuals yet

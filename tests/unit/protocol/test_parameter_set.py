@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
+from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.plan import LinePlan
 from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import DriveError, ParameterKey, ParameterValue
 from fcmaster.protocol.parameter_set import (
@@ -11,6 +15,7 @@ from fcmaster.protocol.parameter_set import (
     ParameterSet,
     compare,
     identity_mismatches,
+    judge,
     profile_for,
     read_set,
 )
@@ -106,3 +111,60 @@ async def test_read_set_reads_identity_then_members_and_keeps_refusals() -> None
     assert found.parameters["F2.17"].refused == DriveError(30, "refused")
     assert found.parameters["F0.08"].raw == 7
     assert progress[-1] == (len(asked), len(asked))
+
+
+def _fc_encode(key: str, value: float) -> object:
+    codec = codec_for(LinePlan(name="t", port="", protocol="danfoss-fc"))
+    return codec.write(1, codec.parameter(key), 0, value, None, persist=True)
+
+
+def test_the_sets_hold_no_factory_reset_and_operation_modes_are_line_settings() -> None:
+    fc = profile_for("danfoss-fc")
+    assert "14-22" not in dict(fc.members)  # Operation Mode: "initialise" resets the drive
+    assert "1-20" not in dict(fc.members)  # motor data: not in this set
+    assert fc.frequency_ceilings == {"4-14"} <= set(dict(fc.members))
+    mitsubishi = profile_for("mitsubishi")
+    assert "Pr.79" in mitsubishi.link_settings  # operation mode: never restored
+    assert mitsubishi.frequency_ceilings == {"Pr.1", "Pr.18"}
+    ranged = {key for key, _, _ in fc.ranges}
+    assert ranged == {"3-41", "3-42", "3-51", "3-52", "3-81", "8-03"} <= set(dict(fc.members))
+
+
+def test_judge_refuses_what_is_outside_the_set_or_cannot_be_sent_and_bounds_ceilings() -> None:
+    fc = profile_for("danfoss-fc")
+    saved = fc_set()
+    saved.parameters["14-22"] = Entry(name="Operation Mode", value=2.0, raw=2)
+    saved.parameters["8-03"] = Entry(name="", value=-5.0, unit="s")
+    saved.parameters["4-14"] = Entry(value=500.0, unit="Hz")
+    saved.parameters["8-31"] = Entry(value=-1.0)  # a line setting: never written, not judged
+    saved.parameters["3-41"] = Entry(value="fast")
+    saved.parameters["3-42"] = Entry(value=0.0, unit="s")  # sendable, but below 0.01 s
+    saved.parameters["3-81"] = Entry(value=0.01, unit="s")  # the guide's least: fine
+    verdict = judge(fc, saved, _fc_encode, max_frequency_hz=50.0)
+    assert verdict.refused == (
+        "14-22 (Operation Mode): not in the danfoss-fc parameter set, and a restore writes only "
+        "the set's own parameters",
+        "8-03 (Control Word Timeout Time) = -5 s: cannot be written (8-03: raw value -50 is "
+        "outside 0…4294967295)",
+        "3-41 (Ramp 1 Ramp Up Time): 'fast' is not a number",
+        "3-42 (Ramp 1 Ramp Down Time) = 0 s: outside 0.01-3600 s",
+    )
+    assert verdict.beyond_limits == (
+        "4-14 (Motor Speed High Limit [Hz]) = 500 Hz is above the drive's configured "
+        "max_frequency_hz 50",
+    )
+    assert judge(fc, saved, _fc_encode).beyond_limits == ()  # no configured limit known
+
+
+@given(st.floats(allow_nan=True, allow_infinity=True))
+def test_judge_refuses_exactly_the_values_the_codec_cannot_send(value: float) -> None:
+    fc = profile_for("danfoss-fc")
+    saved = ParameterSet(protocol="danfoss-fc", address=1)
+    saved.parameters["4-12"] = Entry(value=value, unit="Hz")  # no range of its own
+    try:
+        _fc_encode("4-12", value)
+    except UsageError:
+        sendable = False
+    else:
+        sendable = True
+    assert bool(judge(fc, saved, _fc_encode).refused) is not sendable
