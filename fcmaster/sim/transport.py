@@ -115,11 +115,11 @@ class SimTransport:
         buffer.clear()
         return data
 
-    def _deliver(self) -> None:
-        """Hand the receiver what has reached the master by now."""
+    def _deliver(self, at: float | None = None) -> None:
+        """Hand the receiver what has reached the master by now (which arrived ``at``)."""
         data = self.line.receive()
         if data:
-            self._receiver.arrived(data, self._clock.now())
+            self._receiver.arrived(data, self._clock.now() if at is None else at)
 
     def _schedule_pump(self) -> None:
         due = self.line.next_delivery()
@@ -128,12 +128,16 @@ class SimTransport:
         if self._pump is not None:
             self._pump.cancel()
         self._pump_at = due
-        self._pump = self._clock.call_at(due, self._on_pump)
+        # A plain timer, not a spun one: timers that fall due together run in the order of
+        # their times, so a delivery due before a reply's deadline is always handed over
+        # before the deadline fires, however late the loop gets to them. Stamped with the
+        # time the bytes arrived, not the time the timer ran.
+        self._pump = self._clock.timer_at(due, self._on_pump)
 
     def _on_pump(self) -> None:
         self._pump = None
         if self._open:
-            self._deliver()
+            self._deliver(min(self._pump_at, self._clock.now()))
             self._schedule_pump()
 
 
