@@ -310,6 +310,17 @@ class TapTransport:
         self.inner.check_open()
 
     @property
+    def framing(self) -> TapTransport:
+        return self
+
+    @property
+    def adapter(self) -> Any:
+        return self.inner.adapter
+
+    async def appeared(self) -> None:
+        await self.inner.appeared()
+
+    @property
     def received_at(self) -> float:
         return self.inner.received_at
 

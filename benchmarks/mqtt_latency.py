@@ -48,10 +48,13 @@ from fcmaster.clock import Clock, new_event_loop
 from fcmaster.config import parse
 from fcmaster.hub import Hub
 from fcmaster.protocol.danfoss_fc import decode_telegram
+from fcmaster.protocol.framing import Framer
 from fcmaster.service import Service
 from fcmaster.sim.service import sim_transport
 from fcmaster.state import FleetState
-from fcmaster.transport.pipe import Transport
+from fcmaster.transport.pipe import Framing, Transport
+from fcmaster.transport.receiver import Handler, Piece
+from fcmaster.transport.usb import Adapter
 
 now = time.perf_counter
 NODELAY = ((socket.IPPROTO_TCP, socket.TCP_NODELAY, 1),)
@@ -71,11 +74,39 @@ class TapTransport:
         await self.inner.close()
 
     async def write(self, data: bytes) -> None:
+        self.write_now(data)
+
+    def write_now(self, data: bytes) -> None:
         self.writes.append((now(), data))
-        await self.inner.write(data)
+        self._framing().write_now(data)
 
     async def read(self, deadline: float) -> bytes:
         return await self.inner.read(deadline)
+
+    def watch_frame(self, framer: Framer, deadline: float, gap_s: float, handler: Handler) -> Piece:
+        return self._framing().watch_frame(framer, deadline, gap_s, handler)
+
+    def unwatch(self) -> None:
+        self._framing().unwatch()
+
+    def check_open(self) -> None:
+        self._framing().check_open()
+
+    def _framing(self) -> Framing:
+        framing = self.inner.framing
+        assert framing is not None
+        return framing
+
+    @property
+    def framing(self) -> TapTransport:
+        return self
+
+    @property
+    def adapter(self) -> Adapter | None:
+        return self.inner.adapter
+
+    async def appeared(self) -> None:
+        await self.inner.appeared()
 
     @property
     def received_at(self) -> float:

@@ -29,8 +29,21 @@ from typing import ClassVar, Protocol
 _PR_SET_TIMERSLACK = 29
 
 
+class Cancellable(Protocol):
+    """A scheduled call that can be called off."""
+
+    def cancel(self) -> None:
+        """Do not make the call (a no-op once it was made)."""
+
+
 class Clock(Protocol):
-    """Monotonic time in float seconds, and waiting on it."""
+    """Monotonic time in float seconds, and waiting on it: by a task, or by a callback.
+
+    The callbacks are what a line's runner is made of (:mod:`fcmaster.bus.steady`, the
+    transports' receivers): a virtual clock calls them in virtual time exactly as the real
+    one calls them on the event loop, so the path a real port runs is the path the
+    virtual-time tests run.
+    """
 
     def now(self) -> float:
         """Seconds on a monotonic clock."""
@@ -43,6 +56,22 @@ class Clock(Protocol):
 
     async def sleep_until(self, deadline: float) -> None:
         """Wait until ``now() >= deadline``."""
+
+    def call_at(self, deadline: float, callback: Callable[[], None]) -> Cancellable:
+        """Call ``callback`` at ``deadline``, never before it, as precisely as the clock can."""
+
+    def timer_at(self, deadline: float, callback: Callable[[], None]) -> Cancellable:
+        """Call ``callback`` at ``deadline`` or a little after (a deadline's plain timer).
+
+        Not spun to the microsecond like :meth:`call_at`: for reply deadlines and
+        inter-character gaps, where a wake-up's lateness costs nothing.
+        """
+
+    def wait_briefly(self, deadline: float) -> bool:
+        """Spin until ``deadline`` if it is nearer than a wake-up would come; whether it did.
+
+        A clock that never spins says False at once, and the caller uses :meth:`call_at`.
+        """
 
 
 class MonotonicClock:
@@ -132,6 +161,10 @@ class MonotonicClock:
         holder = Timer()
         self._arm(holder, deadline, callback)
         return holder
+
+    def timer_at(self, deadline: float, callback: Callable[[], None]) -> asyncio.TimerHandle:
+        """A plain timer on the running loop for ``deadline`` (see :meth:`Clock.timer_at`)."""
+        return asyncio.get_running_loop().call_later(deadline - self.now(), callback)
 
     def _arm(self, holder: Timer, deadline: float, callback: Callable[[], None]) -> None:
         loop = asyncio.get_running_loop()

@@ -5,13 +5,16 @@ from __future__ import annotations
 import asyncio
 import heapq
 import itertools
-from bisect import insort
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import TypeVar
 
-from fcmaster.clock import Clock, MonotonicClock
+from fcmaster.clock import Cancellable, Clock, MonotonicClock
 from fcmaster.errors import PortError, ReplyTimeout
+from fcmaster.protocol.framing import Framer
+from fcmaster.transport.receiver import Handler, Piece, Receiver
+from fcmaster.transport.usb import Adapter
 
 T = TypeVar("T")
 EPOCH = 1_790_000_000.0  # the virtual clocks' wall clock at their time 0 (2026-09-21)
@@ -53,6 +56,37 @@ class FakeClock:
             self.time = deadline
         await asyncio.sleep(0)
 
+    def call_at(self, deadline: float, callback: Callable[[], None]) -> Cancellable:
+        raise AssertionError(
+            "FakeClock moves only when a task sleeps, so it cannot call back at a time: "
+            "use VirtualClock where something schedules callbacks (a line's transport)"
+        )
+
+    timer_at = call_at
+
+    def wait_briefly(self, deadline: float) -> bool:
+        return False
+
+
+class _Call:
+    """A callback a virtual clock will call; ``cancel()`` calls it off."""
+
+    __slots__ = ("_callback",)
+
+    def __init__(self, callback: Callable[[], None]) -> None:
+        self._callback: Callable[[], None] | None = callback
+
+    def cancel(self) -> None:
+        self._callback = None
+
+    def done(self) -> bool:
+        return self._callback is None
+
+    def fire(self) -> None:
+        callback, self._callback = self._callback, None
+        if callback is not None:
+            callback()
+
 
 class VirtualClock:
     """Virtual time that moves only when the test runs it; sleepers wake in deadline order.
@@ -68,7 +102,8 @@ class VirtualClock:
     def __init__(self, start: float = 1000.0, *, epoch: float = EPOCH) -> None:
         self.time = start
         self.epoch = epoch
-        self._sleepers: list[tuple[float, int, asyncio.Future[None]]] = []
+        # Sleeping tasks (a future to set) and callbacks (call_at, timer_at), by deadline.
+        self._sleepers: list[tuple[float, int, asyncio.Future[None] | _Call]] = []
         self._order = itertools.count()
 
     def now(self) -> float:
@@ -88,6 +123,17 @@ class VirtualClock:
         heapq.heappush(self._sleepers, (deadline, next(self._order), future))
         await future
 
+    def call_at(self, deadline: float, callback: Callable[[], None]) -> _Call:
+        """Call ``callback`` when virtual time reaches ``deadline`` (in deadline order)."""
+        call = _Call(callback)
+        heapq.heappush(self._sleepers, (deadline, next(self._order), call))
+        return call
+
+    timer_at = call_at
+
+    def wait_briefly(self, deadline: float) -> bool:
+        return False  # virtual time never spins: the caller schedules the call
+
     def next_deadline(self) -> float | None:
         """When the earliest sleeper wakes; None when nothing sleeps on this clock."""
         while self._sleepers and self._sleepers[0][2].done():  # cancelled sleepers
@@ -100,9 +146,12 @@ class VirtualClock:
             await asyncio.sleep(0)
 
     async def _wake_next(self) -> None:
-        deadline, _, future = heapq.heappop(self._sleepers)
+        deadline, _, sleeper = heapq.heappop(self._sleepers)
         self.time = max(self.time, deadline)
-        future.set_result(None)
+        if isinstance(sleeper, _Call):
+            sleeper.fire()
+        else:
+            sleeper.set_result(None)
         await self.settle()
 
     async def run_until(self, when: float) -> None:
@@ -161,9 +210,14 @@ class ScriptedTransport:
 
     A reply given as bytes arrives, whole, ``delay_s`` plus the wire time of request and
     reply after the write; a :class:`Timed` reply arrives in the pieces and at the times it
-    names. ``inject`` queues raw bytes that arrive now (noise, a late reply): the next read
-    returns them, or the next ``discard_input`` drops them. The transport checks the
-    half-duplex rule itself: a write while a reply is still due fails.
+    names. ``inject`` delivers raw bytes now (noise, a late reply): the next read returns
+    them, or the next ``discard_input`` drops them. The transport checks the half-duplex
+    rule itself: a write while a reply is still due fails.
+
+    The bytes arrive on the clock's timers into the serial transport's own
+    :class:`~fcmaster.transport.receiver.Receiver`, and the transport has a serial port's
+    callback powers (:attr:`framing`), so the master runs the path a real port runs:
+    replies framed in the reader callback, polls carried in callbacks.
     """
 
     clock: Clock
@@ -178,9 +232,25 @@ class ScriptedTransport:
     open_error: Exception | None = None  # raised by the next open (a port driver's bug)
     read_error: Exception | None = None  # raised by the next read
     lost: bool = False  # the port is gone: writes and reads raise PortError
-    received_at: float = 0.0  # when the last bytes read arrived
-    _arrivals: list[tuple[float, bytes]] = field(default_factory=list)  # sorted by time
+    adapter: Adapter | None = None  # the USB adapter a test puts behind the line
+    _receiver: Receiver = field(init=False)
+    _deliveries: list[Cancellable] = field(default_factory=list)  # arrivals still to come
     _reply_until: float = float("-inf")
+
+    def __post_init__(self) -> None:
+        self._receiver = Receiver(self.clock)
+
+    @property
+    def received_at(self) -> float:
+        """When the last bytes arrived."""
+        return self._receiver.received_at
+
+    @property
+    def framing(self) -> ScriptedTransport:
+        return self
+
+    async def appeared(self) -> None:
+        await asyncio.Event().wait()  # a scripted line has no device node
 
     async def open(self) -> None:
         self.open_attempts.append(self.clock.now())
@@ -191,13 +261,21 @@ class ScriptedTransport:
             raise PortError("scripted open failure")
         self.opened += 1
         self.lost = False
+        self._receiver.lost = None
 
     async def close(self) -> None:
         self.closed += 1
-        self._arrivals.clear()
+        for delivery in self._deliveries:
+            delivery.cancel()
+        self._deliveries.clear()
+        self._receiver.unwatch()
+        self._receiver.buffer.clear()
         self._reply_until = float("-inf")
 
     async def write(self, data: bytes) -> None:
+        self.write_now(data)
+
+    def write_now(self, data: bytes) -> None:
         if self.lost:
             raise PortError("scripted line loss")
         now = self.clock.now()
@@ -211,43 +289,55 @@ class ScriptedTransport:
             pieces = [(now + offset, chunk) for offset, chunk in reply.pieces]
         else:
             pieces = [(now + (len(data) + len(reply)) * self.char_s + self.delay_s, reply)]
-        for piece in pieces:
-            insort(self._arrivals, piece)
+        for at, chunk in sorted(pieces, key=lambda piece: piece[0]):
+            self._deliveries.append(self.clock.timer_at(at, partial(self._arrive, chunk, at)))
         sent.reply_at = max(at for at, _ in pieces)
         self._reply_until = max(self._reply_until, sent.reply_at)
 
-    async def read(self, deadline: float) -> bytes:
+    def _arrive(self, chunk: bytes, at: float) -> None:
+        if self.lost:  # the reply never comes: a reader hears of the loss now, as from a port
+            self._receiver.connection_lost(PortError("scripted line loss"))
+        else:
+            self._receiver.arrived(chunk, at)
+
+    def _note_deadline(self, deadline: float) -> None:
         if self.sent:
             last = self.sent[-1]
             last.deadline = deadline if last.deadline is None else max(last.deadline, deadline)
+
+    async def read(self, deadline: float) -> bytes:
+        self._note_deadline(deadline)
         if self.read_error is not None:
             error, self.read_error = self.read_error, None
             raise error
+        self.check_open()
+        receiver = self._receiver
+        if not receiver.buffer:
+            await receiver.wait_bytes(deadline)
+            self.check_open()
+            if not receiver.buffer:
+                raise ReplyTimeout("scripted timeout")
+        return self.discard_input()
+
+    def watch_frame(self, framer: Framer, deadline: float, gap_s: float, handler: Handler) -> Piece:
+        self._note_deadline(deadline)
+        if self.read_error is not None:
+            error, self.read_error = self.read_error, None
+            raise error
+        return self._receiver.watch(framer, deadline, gap_s, handler)
+
+    def unwatch(self) -> None:
+        self._receiver.unwatch()
+
+    def check_open(self) -> None:
         if self.lost:
             raise PortError("scripted line loss")
-        if self._arrivals and self._arrivals[0][0] <= deadline:
-            await self.clock.sleep_until(self._arrivals[0][0])
-            if self.lost:
-                raise PortError("scripted line loss")
-            return self._take_arrived()
-        await self.clock.sleep_until(deadline)
-        if self.lost:
-            raise PortError("scripted line loss")
-        raise ReplyTimeout("scripted timeout")
 
     def discard_input(self) -> bytes:
-        return self._take_arrived()
+        buffer = self._receiver.buffer
+        data = bytes(buffer)
+        buffer.clear()
+        return data
 
     def inject(self, data: bytes) -> None:
-        insort(self._arrivals, (self.clock.now(), data))
-
-    def _take_arrived(self) -> bytes:
-        now = self.clock.now()
-        count = 0
-        while count < len(self._arrivals) and self._arrivals[count][0] <= now:
-            count += 1
-        arrived = b"".join(chunk for _, chunk in self._arrivals[:count])
-        if count:
-            self.received_at = self._arrivals[count - 1][0]
-        del self._arrivals[:count]
-        return arrived
+        self._receiver.arrived(data, self.clock.now())

@@ -19,10 +19,12 @@ a command's exchange keeps the fixed deadline, since a drive may take longer ove
 (storing a parameter) and a late answer must not turn a command that was carried out into
 a timeout. ``timeout_s`` in the config overrides both.
 
-On a transport that frames in its reader callback (:meth:`Link.watch`), a reply is taken
-there, once whole, and :meth:`Link.send_now` writes from a callback: the BusMaster's steady
-polling chains exchanges that way. :meth:`Link.send` and :meth:`Link.receive` are the same
-steps for a task.
+A reply is taken in the transport's reader callback (:meth:`Link.watch`), once whole, and
+:meth:`Link.send_now` writes from a callback: the BusMaster's steady polling chains
+exchanges that way. :meth:`Link.send` and :meth:`Link.receive` are the same steps for a
+task, and receive waits on the same watch: every transport a line runs on has these
+callback powers (:class:`~fcmaster.transport.pipe.Framing`), so there is one way a reply is
+read, on a real port and in the virtual-time tests alike.
 
 The BusMaster drives a Link from its planner; the commissioning commands (scan, status,
 read, write, control) drive one directly.
@@ -38,7 +40,7 @@ from fcmaster.bus.frame_log import RX, TX, FrameLog
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.stats import LineStats
 from fcmaster.clock import Clock
-from fcmaster.errors import MalformedReply, ProtocolError, ReplyTimeout, UnexpectedReply
+from fcmaster.errors import MalformedReply, ProtocolError, UnexpectedReply
 from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
 from fcmaster.protocol.framing import Frame, Framer, Skipped, SkipReason
 from fcmaster.transport.pipe import Transport
@@ -86,15 +88,16 @@ class Link:
         self.replied_at = 0.0  # when the last byte of the last reply arrived
         self._arrived = 0.0
         self._framer = codec.new_framer()
-        # Transports that frame as bytes arrive and write at once (SerialTransport) let a
-        # whole exchange run in callbacks: see watch and send_now.
-        watch_frame: WatchFrame | None = getattr(transport, "watch_frame", None)
-        write_now: Callable[[bytes], None] | None = getattr(transport, "write_now", None)
-        self.steady = watch_frame is not None and write_now is not None
-        self._watch_frame: WatchFrame = watch_frame or _no_watch
-        self._write_now: Callable[[bytes], None] = write_now or _no_write
-        self._unwatch: Callable[[], None] = getattr(transport, "unwatch", _nothing)
-        self._check_open: Callable[[], None] = getattr(transport, "check_open", _nothing)
+        # Every line's transport frames as bytes arrive and writes at once (a serial port,
+        # the simulator's line, the tests' scripted line): a whole exchange runs in
+        # callbacks, see watch and send_now, and a task's receive waits on the same watch.
+        framing = transport.framing
+        if framing is None:
+            raise TypeError(f"{type(transport).__name__} cannot frame in its reader callback")
+        self._watch_frame: WatchFrame = framing.watch_frame
+        self._write_now: Callable[[bytes], None] = framing.write_now
+        self._unwatch: Callable[[], None] = framing.unwatch
+        self._check_open: Callable[[], None] = framing.check_open
         self._exchange: Exchange | None = None  # what the watch waits for, until when
         self._deadline = 0.0
         self._gap = 0.0
@@ -117,8 +120,8 @@ class Link:
         two chunks up to a tick apart, and a gap shorter than that would cut it in two (its
         halves counted as noise, the poll as a timeout). The plan's gap still follows.
         """
-        adapter = getattr(self.transport, "adapter", None)
-        latency_ms: int | None = adapter.latency_ms if adapter is not None else None
+        adapter = self.transport.adapter
+        latency_ms = adapter.latency_ms if adapter is not None else None
         if not latency_ms:
             return self._plan_gap_s
         return latency_ms / 1000 + self._plan_gap_s
@@ -160,7 +163,7 @@ class Link:
         self._written(exchange, written_at)
 
     def send_now(self, exchange: Exchange) -> None:
-        """:meth:`send` from a callback, once :attr:`ready_at` has passed (see :attr:`steady`)."""
+        """:meth:`send` from a callback, once :attr:`ready_at` has passed."""
         written_at = self._writing(exchange)
         self._write_now(exchange.request)
         self._written(exchange, written_at)
@@ -219,15 +222,12 @@ class Link:
         ``adaptive``: the deadline follows the line; otherwise it is the plan's fixed one.
         """
         deadline = self.reply_deadline(exchange, adaptive=adaptive)
-        if self.steady:
-            waiter: asyncio.Future[Reply | None] = asyncio.get_running_loop().create_future()
-            self.watch(exchange, deadline, partial(_settle, waiter))
-            try:
-                reply = await waiter
-            finally:
-                self.unwatch()
-        else:
-            reply = await self._read_until(exchange, deadline)
+        waiter: asyncio.Future[Reply | None] = asyncio.get_running_loop().create_future()
+        self.watch(exchange, deadline, partial(_settle, waiter))
+        try:
+            reply = await waiter
+        finally:
+            self.unwatch()
         self.received(exchange, reply)
         return reply
 
@@ -260,35 +260,13 @@ class Link:
             return None
         return await self.receive(exchange)
 
-    async def _read_until(self, exchange: Exchange, deadline: float) -> Reply | None:
-        """The reply, read chunk by chunk (a transport that cannot frame as bytes arrive)."""
-        framer, transport, clock = self._framer, self.transport, self.clock
-        gap_s = self.gap_s
-        last_rx = clock.now()
-        while True:
-            read_deadline = min(deadline, last_rx + gap_s) if framer.buffered else deadline
-            try:
-                chunk = await transport.read(read_deadline)
-            except ReplyTimeout:
-                # A gap (or the deadline): an unfinished frame will not be completed.
-                framer.reset()
-                reply = self._drain(exchange)
-                if reply is not None or read_deadline >= deadline:
-                    return reply
-                continue
-            last_rx = self._arrived = transport.received_at
-            framer.feed(chunk)
-            reply = self._drain(exchange)
-            if reply is not None:
-                return reply
-
     def watch(self, exchange: Exchange, deadline: float, done: Answered) -> None:
         """Read the reply to the request just sent in the transport's reader callback.
 
         ``done`` is called once: with the reply, with None when none came before
         ``deadline``, or with the exception that ended the read (the port was lost). The
         chunks of a reply are fed to the framer as they arrive and ``done`` is called when
-        it is whole: no task wakes for it. Only where :attr:`steady` is true.
+        it is whole: no task wakes for it.
         """
         self._exchange, self._deadline, self._done = exchange, deadline, done
         self._gap = self.gap_s
@@ -431,15 +409,3 @@ def _settle(
         waiter.set_exception(error)
     else:
         waiter.set_result(reply)
-
-
-def _nothing() -> None:
-    pass
-
-
-def _no_watch(*_: object) -> Frame | Skipped | None:
-    raise RuntimeError("this transport cannot frame in its reader callback")
-
-
-def _no_write(_: bytes) -> None:
-    raise RuntimeError("this transport cannot write from a callback")

@@ -17,8 +17,9 @@ The pause is counted from the reply's arrival, so the work inside it is free; th
 sleep must be precise for this to hold (see :mod:`fcmaster.clock`). A command that arrives
 during the pause still goes first: the step chosen before it is chosen again, and a command
 chosen before the pause that ended meanwhile (cancelled at shutdown, superseded by a stop)
-is never sent. On a serial port with the real clock, runs of polls and probes are carried
-in callbacks instead of by this loop (:mod:`~fcmaster.bus.steady`), with the same steps and
+is never sent. Runs of polls and probes are carried in callbacks instead of by this loop,
+on every transport (a serial port, the simulator's line, the virtual-time tests' scripted
+line) (:mod:`~fcmaster.bus.steady`), with the same steps and
 the same rules; what the line tells the layers above goes through
 :mod:`~fcmaster.bus.reporting`.
 
@@ -54,7 +55,7 @@ from fcmaster.bus.planner import Completion, Planner, Step, StepKind
 from fcmaster.bus.reporting import LineReporter
 from fcmaster.bus.stats import DriveStats, LineStats
 from fcmaster.bus.steady import SteadyPolling
-from fcmaster.clock import Clock, MonotonicClock
+from fcmaster.clock import Clock
 from fcmaster.errors import (
     PortError,
 )
@@ -87,18 +88,14 @@ class BusMaster:
         self._transport = transport
         self._clock = clock
         self._link = Link(plan, codec=codec, transport=transport, clock=clock, stats=self.stats)
-        # Polls run in callbacks where the transport and the clock allow it: see steady.py.
-        self._steady = (
-            SteadyPolling(
-                self.planner,
-                self._link,
-                clock,
-                sent=self._sent,
-                replied=self._replied,
-                failed=self._failed,
-            )
-            if self._link.steady and isinstance(clock, MonotonicClock)
-            else None
+        # Polls run in callbacks: see steady.py.
+        self._steady = SteadyPolling(
+            self.planner,
+            self._link,
+            clock,
+            sent=self._sent,
+            replied=self._replied,
+            failed=self._failed,
         )
         self._observer: BusObserver = observer or NullObserver()
         self._rng = rng or random.Random()
@@ -245,12 +242,8 @@ class BusMaster:
 
     async def _retry_after(self, delay: float) -> None:
         """Wait ``delay``, or less when the port's device node appears (adapter plugged in)."""
-        appeared = getattr(self._transport, "appeared", None)
-        if appeared is None:
-            await self._clock.sleep(delay)
-            return
         sleeper = asyncio.ensure_future(self._clock.sleep(delay))
-        watcher = asyncio.ensure_future(appeared())
+        watcher = asyncio.ensure_future(self._transport.appeared())
         try:
             await asyncio.wait((sleeper, watcher), return_when=asyncio.FIRST_COMPLETED)
         finally:
@@ -309,7 +302,7 @@ class BusMaster:
                 self._report.flush()
                 await self._idle(planner.next_wakeup(now))
                 continue
-            if steady is not None and steady.carries(step):
+            if steady.carries(step):
                 await steady.run(step)  # polls in callbacks, until another kind of step
                 continue
             if link.ready_at > now:

@@ -7,8 +7,8 @@ wake-up runs several times slower than warm code. Here the same steps are chaine
 callbacks instead: when the reply's last byte arrives, the transport's reader callback
 hands it over (:meth:`~fcmaster.bus.link.Link.watch`), and right there the reply is
 decoded and accounted for, the planner chooses the next step, and its request is written
-by a timer at the end of the pause (:meth:`~fcmaster.clock.MonotonicClock.call_at`, which
-never ends a pause early). No task wakes and no future is made until something else is to
+by a timer at the end of the pause (the clock's ``call_at``, which never ends a pause
+early). No task wakes and no future is made until something else is to
 be done.
 
 The rules are the master's, applied by the same code: :class:`SteadyPolling` calls the
@@ -25,31 +25,11 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import Protocol
 
 from fcmaster.bus.link import Link
 from fcmaster.bus.planner import Planner, Step, StepKind
+from fcmaster.clock import Cancellable, Clock
 from fcmaster.protocol.codec import Reply
-
-
-class Cancellable(Protocol):
-    """A scheduled call that can be called off."""
-
-    def cancel(self) -> None:
-        """Do not make the call."""
-
-
-class CallingClock(Protocol):
-    """A clock that can call a function at a deadline, never before it."""
-
-    def now(self) -> float:
-        """Seconds on a monotonic clock."""
-
-    def call_at(self, deadline: float, callback: Callable[[], None]) -> Cancellable:
-        """Call ``callback`` on the running loop at ``deadline``."""
-
-    def wait_briefly(self, deadline: float) -> bool:
-        """Spin until ``deadline`` if it is nearer than a wake-up would come; whether it did."""
 
 
 class SteadyPolling:
@@ -59,7 +39,7 @@ class SteadyPolling:
         self,
         planner: Planner,
         link: Link,
-        clock: CallingClock,
+        clock: Clock,
         *,
         sent: Callable[[Step], None],
         replied: Callable[[Step, Reply], None],

@@ -8,15 +8,25 @@ virtual time; with :class:`~fcmaster.clock.MonotonicClock` it takes as long as t
 
 from __future__ import annotations
 
-from fcmaster.clock import Clock
+import asyncio
+
+from fcmaster.clock import Cancellable, Clock
 from fcmaster.errors import PortError, ReplyTimeout, UsageError
+from fcmaster.protocol.framing import Framer
 from fcmaster.sim.line import SimLine
+from fcmaster.transport.receiver import Handler, Piece, Receiver
 
 SIM_SCHEME = "sim://"
 
 
 class SimTransport:
-    """A :class:`~fcmaster.transport.pipe.Transport` on a simulated line."""
+    """A :class:`~fcmaster.transport.pipe.Transport` on a simulated line.
+
+    What the line delivers to the master is pumped, at the time it arrives, into the serial
+    transport's own :class:`~fcmaster.transport.receiver.Receiver`, so the transport has a
+    serial port's callback powers (:attr:`framing`) and the master runs on a simulated line
+    exactly the path it runs on a real port.
+    """
 
     def __init__(self, line: SimLine, clock: Clock, *, port: str = "sim://") -> None:
         """Talk to ``line``, waiting on ``clock`` (which must be the clock the line reads)."""
@@ -24,42 +34,111 @@ class SimTransport:
         self.line = line
         self._clock = clock
         self._open = False
-        self.received_at = 0.0  # the simulated line hands bytes over as they arrive
+        self._receiver = Receiver(clock)
+        self._pump: Cancellable | None = None  # the timer for the line's next delivery
+        self._pump_at = 0.0
+
+    @property
+    def received_at(self) -> float:
+        """When the bytes the master last got reached it."""
+        return self._receiver.received_at
 
     async def open(self) -> None:
         """Connect; a simulated line is always there."""
         self._open = True
+        self._receiver.lost = None
 
     async def close(self) -> None:
         """Disconnect; safe when not open."""
         self._open = False
+        if self._pump is not None:
+            self._pump.cancel()
+            self._pump = None
+        self._receiver.unwatch()
+        self._receiver.buffer.clear()
 
     async def write(self, data: bytes) -> None:
         """Put ``data`` on the line now (the call returns before the bytes are out)."""
-        self._check_open()
+        self.write_now(data)
+
+    def write_now(self, data: bytes) -> None:
+        """:meth:`write` from a callback."""
+        self.check_open()
         self.line.write(data)
+        self._schedule_pump()
 
     async def read(self, deadline: float) -> bytes:
         """The bytes that reached the master, waiting until at least one has or ``deadline``."""
-        self._check_open()
-        line, clock = self.line, self._clock
-        while True:
-            data = line.receive()
-            if data:
-                self.received_at = clock.now()
-                return data
-            if clock.now() >= deadline:
+        self.check_open()
+        self._deliver()
+        receiver = self._receiver
+        if not receiver.buffer:
+            await receiver.wait_bytes(deadline)
+            self.check_open()
+            if not receiver.buffer:
                 raise ReplyTimeout(f"nothing from {self.port} before the deadline", bus=self.port)
-            due = line.next_delivery()
-            await clock.sleep_until(deadline if due is None else min(due, deadline))
+        return self._take()
+
+    def watch_frame(self, framer: Framer, deadline: float, gap_s: float, handler: Handler) -> Piece:
+        """Feed ``framer`` as the line delivers; see :class:`~fcmaster.transport.pipe.Framing`."""
+        self._deliver()
+        return self._receiver.watch(framer, deadline, gap_s, handler)
+
+    def unwatch(self) -> None:
+        """Stop a :meth:`watch_frame`."""
+        self._receiver.unwatch()
+
+    def check_open(self) -> None:
+        """PortError when the transport is not open."""
+        if not self._open:
+            raise PortError(f"{self.port} is not open", bus=self.port)
 
     def discard_input(self) -> bytes:
         """Drop and return what reached the master and was not read."""
-        return self.line.receive()
+        self._deliver()
+        return self._take()
 
-    def _check_open(self) -> None:
-        if not self._open:
-            raise PortError(f"{self.port} is not open", bus=self.port)
+    @property
+    def framing(self) -> SimTransport:
+        """This transport frames in callbacks, as a serial port does."""
+        return self
+
+    adapter = None  # no USB adapter: the simulated line's own adapter model is in the line
+
+    async def appeared(self) -> None:
+        """Never: a simulated line has no device node to come back."""
+        await asyncio.Event().wait()
+
+    def _take(self) -> bytes:
+        buffer = self._receiver.buffer
+        data = bytes(buffer)
+        buffer.clear()
+        return data
+
+    def _deliver(self, at: float | None = None) -> None:
+        """Hand the receiver what has reached the master by now (which arrived ``at``)."""
+        data = self.line.receive()
+        if data:
+            self._receiver.arrived(data, self._clock.now() if at is None else at)
+
+    def _schedule_pump(self) -> None:
+        due = self.line.next_delivery()
+        if due is None or (self._pump is not None and self._pump_at <= due):
+            return
+        if self._pump is not None:
+            self._pump.cancel()
+        self._pump_at = due
+        # A plain timer, not a spun one: timers that fall due together run in the order of
+        # their times, so a delivery due before a reply's deadline is always handed over
+        # before the deadline fires, however late the loop gets to them. Stamped with the
+        # time the bytes arrived, not the time the timer ran.
+        self._pump = self._clock.timer_at(due, self._on_pump)
+
+    def _on_pump(self) -> None:
+        self._pump = None
+        if self._open:
+            self._deliver(min(self._pump_at, self._clock.now()))
+            self._schedule_pump()
 
 
 def sim_name(port: str) -> str | None:

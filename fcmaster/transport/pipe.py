@@ -4,17 +4,46 @@ A transport moves bytes and nothing else: no framing, no retries, no timing poli
 ``typing.Protocol`` so the simulator's in-process line and test doubles meet it without
 inheriting from anything.
 
-A transport may offer more (:class:`~fcmaster.transport.serial.SerialTransport` does): a
-``write_now`` that takes the bytes from a plain callback, and a ``watch_frame`` that feeds
-a framer in its reader callback and calls back once a piece is whole (with ``unwatch`` and
-``check_open``). The :class:`~fcmaster.bus.link.Link` then reads replies without a task
+What a transport can do beyond moving bytes is part of its type, never guessed at: its
+:attr:`Transport.framing` (the powers of :class:`Framing`: write from a plain callback, and
+feed a framer in its reader callback, calling back once a piece is whole), the USB
+:attr:`Transport.adapter` behind it, and :meth:`Transport.appeared` for a device node that
+comes back. With framing, the :class:`~fcmaster.bus.link.Link` reads replies without a task
 waking per chunk, and the BusMaster carries its polls in callbacks
-(:mod:`fcmaster.bus.steady`). Without them the same rules run in the master's task.
+(:mod:`fcmaster.bus.steady`) — on a real port and on the virtual-time tests' scripted line
+alike. Without it the same rules run in the master's task.
 """
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
+
+from fcmaster.transport.receiver import Handler, Piece
+
+if TYPE_CHECKING:
+    from fcmaster.protocol.framing import Framer
+    from fcmaster.transport.usb import Adapter
+
+
+class Framing(Protocol):
+    """A transport's callback powers: what lets a line run without a task waking."""
+
+    def write_now(self, data: bytes) -> None:
+        """Hand ``data`` to the port from a plain callback; PortError if it is gone."""
+
+    def watch_frame(self, framer: Framer, deadline: float, gap_s: float, handler: Handler) -> Piece:
+        """Feed ``framer`` as bytes arrive; ``handler`` gets the next whole piece.
+
+        A piece whole already is returned and ``handler`` is not called; otherwise it is
+        called once, later: with the piece, or None at ``deadline``, after a gap of
+        ``gap_s`` behind an unfinished frame, or when the port was lost.
+        """
+
+    def unwatch(self) -> None:
+        """Stop a :meth:`watch_frame` (its handler is not called)."""
+
+    def check_open(self) -> None:
+        """Raise PortError if the port was lost."""
 
 
 class Transport(Protocol):
@@ -47,3 +76,14 @@ class Transport(Protocol):
 
     def discard_input(self) -> bytes:
         """Drop and return whatever was received and not read yet (late replies, noise)."""
+
+    @property
+    def framing(self) -> Framing | None:
+        """The transport's callback powers; None where replies can only be awaited."""
+
+    @property
+    def adapter(self) -> Adapter | None:
+        """The USB adapter behind a local port, once open (its latency timer); else None."""
+
+    async def appeared(self) -> None:
+        """Return when the port's vanished device node is back; never, where it has none."""

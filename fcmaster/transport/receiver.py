@@ -10,16 +10,19 @@ at the deadline. A reply then costs one call however the adapter split it, and t
 may be a plain function: the bus master's steady polling decodes the reply and schedules
 the next request from it without a task ever waking.
 
-Times are the transport's :class:`~fcmaster.clock.Clock`'s; timers go on the event loop
-as delays from the clock's present, so the clock need not share the loop's timebase.
+Times are the transport's :class:`~fcmaster.clock.Clock`'s, and so are the timers (its
+``timer_at``): on the real clock they go on the event loop as delays from the clock's
+present, so the clock need not share the loop's timebase; on a virtual clock they fire in
+virtual time, and the same reader runs in the virtual-time tests.
 """
 
 from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from functools import partial
 
-from fcmaster.clock import Clock
+from fcmaster.clock import Cancellable, Clock
 from fcmaster.protocol.framing import Frame, Framer, Skipped
 
 Piece = Frame | Skipped | None
@@ -35,8 +38,8 @@ class Receiver(asyncio.Protocol):
         "_gap_due",
         "_gap_timer",
         "_handler",
-        "_loop",
         "_now",
+        "_timer_at",
         "buffer",
         "framer",
         "gap_s",
@@ -47,7 +50,7 @@ class Receiver(asyncio.Protocol):
 
     def __init__(self, clock: Clock) -> None:
         self._now = clock.now
-        self._loop: asyncio.AbstractEventLoop | None = None  # set by the readers, which run on it
+        self._timer_at = clock.timer_at
         self.buffer = bytearray()
         self.waiter: asyncio.Future[None] | None = None  # a reader of bytes, while it waits
         self.lost: Exception | None = None
@@ -56,9 +59,9 @@ class Receiver(asyncio.Protocol):
         self.gap_s = 0.0
         self._handler: Handler | None = None
         self._gap_due = 0.0  # when the gap timer is set to look
-        self._gap_timer: asyncio.TimerHandle | None = None
+        self._gap_timer: Cancellable | None = None
         self._deadline = 0.0  # the watching reader's
-        self._deadline_timer: asyncio.TimerHandle | None = None
+        self._deadline_timer: Cancellable | None = None
 
     # -- from the port -----------------------------------------------------------------
 
@@ -88,7 +91,7 @@ class Receiver(asyncio.Protocol):
                 if self._gap_timer is not None:
                     self._gap_timer.cancel()
                 self._gap_due = due
-                self._gap_timer = self._call_later(due, self._on_gap)
+                self._gap_timer = self._timer_at(due, self._on_gap)
 
     def connection_lost(self, exc: Exception | None) -> None:
         """The port is gone: wake whoever waits."""
@@ -103,10 +106,9 @@ class Receiver(asyncio.Protocol):
 
     async def wait_bytes(self, deadline: float) -> None:
         """Return when bytes are buffered, the port is lost, or ``deadline`` passed."""
-        loop = self._loop = asyncio.get_running_loop()
-        waiter: asyncio.Future[None] = loop.create_future()
+        waiter: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         self.waiter = waiter
-        timer = loop.call_later(deadline - self._now(), _expire, waiter)
+        timer = self._timer_at(deadline, partial(_expire, waiter))
         try:
             await waiter
         finally:
@@ -132,7 +134,6 @@ class Receiver(asyncio.Protocol):
             return None
         self.framer, self.gap_s, self._handler = framer, gap_s, handler
         self._deadline = deadline
-        self._loop = asyncio.get_running_loop()
         # Set for this read and cancelled when it ends: a timer kept for the next read
         # would fire during it, a wake-up for nothing (a cancelled one never wakes the loop).
         self._set_deadline_timer(deadline)
@@ -153,7 +154,7 @@ class Receiver(asyncio.Protocol):
     def _set_deadline_timer(self, due: float) -> None:
         if self._deadline_timer is not None:
             self._deadline_timer.cancel()
-        self._deadline_timer = self._call_later(due, self._on_deadline)
+        self._deadline_timer = self._timer_at(due, self._on_deadline)
 
     def _on_deadline(self) -> None:
         self._deadline_timer = None
@@ -171,7 +172,7 @@ class Receiver(asyncio.Protocol):
             if self._gap_timer is not None:
                 self._gap_timer.cancel()
             self._gap_due = due
-            self._gap_timer = self._call_later(due, self._on_gap)
+            self._gap_timer = self._timer_at(due, self._on_gap)
 
     def _on_gap(self) -> None:
         """The gap timer fired: hand over unless bytes came since it was set."""
@@ -179,13 +180,9 @@ class Receiver(asyncio.Protocol):
         due = self.received_at + self.gap_s
         if due > self._now() and self._handler is not None:
             self._gap_due = due
-            self._gap_timer = self._call_later(due, self._on_gap)
+            self._gap_timer = self._timer_at(due, self._on_gap)
             return
         self._hand(None)
-
-    def _call_later(self, when: float, callback: Callable[[], None]) -> asyncio.TimerHandle:
-        loop = self._loop or asyncio.get_running_loop()
-        return loop.call_later(when - self._now(), callback)
 
     def _hand(self, piece: Piece) -> None:
         handler = self._handler

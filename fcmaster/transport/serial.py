@@ -213,6 +213,11 @@ class SerialTransport:
             raise PortError(f"{self.port} was lost: {self._receiver.lost}")
 
     @property
+    def framing(self) -> SerialTransport:
+        """This transport frames in its reader callback and writes from callbacks."""
+        return self
+
+    @property
     def received_at(self) -> float:
         """When the port last delivered bytes (the clock's time)."""
         return self._receiver.received_at

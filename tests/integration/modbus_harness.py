@@ -16,11 +16,13 @@ from fcmaster import config
 from fcmaster.bus.plan import LinePlan
 from fcmaster.clock import MonotonicClock
 from fcmaster.protocol.danfoss_fc import decode_telegram
+from fcmaster.protocol.framing import Framer
 from fcmaster.service import Service
 from fcmaster.sim.danfoss_fc.drive import FcSimDrive
 from fcmaster.sim.line import SimLine
 from fcmaster.sim.service import sim_line
 from fcmaster.sim.transport import SimTransport
+from fcmaster.transport.receiver import Handler, Piece
 from tests.integration.ports import free_port
 
 CONFIG = """
@@ -56,8 +58,20 @@ class RecordingTransport:
         await self.inner.close()
 
     async def write(self, data: bytes) -> None:
+        self.write_now(data)
+
+    def write_now(self, data: bytes) -> None:
         self.written.append(data)
-        await self.inner.write(data)
+        self.inner.write_now(data)
+
+    def watch_frame(self, framer: Framer, deadline: float, gap_s: float, handler: Handler) -> Piece:
+        return self.inner.watch_frame(framer, deadline, gap_s, handler)
+
+    def unwatch(self) -> None:
+        self.inner.unwatch()
+
+    def check_open(self) -> None:
+        self.inner.check_open()
 
     async def read(self, deadline: float) -> bytes:
         return await self.inner.read(deadline)
@@ -68,6 +82,15 @@ class RecordingTransport:
 
     def discard_input(self) -> bytes:
         return self.inner.discard_input()
+
+    @property
+    def framing(self) -> RecordingTransport:
+        return self
+
+    adapter = None
+
+    async def appeared(self) -> None:
+        await asyncio.Event().wait()  # no device node
 
 
 @dataclass

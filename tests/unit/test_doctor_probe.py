@@ -224,7 +224,7 @@ async def test_the_adapter_the_port_opened_on_is_kept_for_the_diagnosis() -> Non
 
     def open_transport(plan: LinePlan) -> Transport:
         transport = ScriptedTransport(clock, at(19200, "E", drives_at(1))(plan), char_s=plan.char_s)
-        transport.adapter = ftdi  # type: ignore[attr-defined]
+        transport.adapter = ftdi
         return transport
 
     survey = await clock.complete(

@@ -16,41 +16,42 @@ from fcmaster.sim import (
     sim_name,
 )
 from fcmaster.transport.pipe import Transport
-from tests.fakes import FakeClock
+from tests.fakes import FakeClock, VirtualClock
 from tests.unit.sim.wire import START, control, fc_line, read
 
 
 async def test_read_returns_the_reply_at_the_time_its_last_byte_arrives() -> None:
-    clock = FakeClock()
+    clock = VirtualClock()
     transport: Transport = SimTransport(fc_line(clock, (1,)), clock)
     await transport.open()
     written = clock.now()
     await transport.write(encode_telegram(read(1, 1613)))
-    reply = await transport.read(written + 1.0)
+    reply = await clock.complete(transport.read(written + 1.0))
     assert clock.now() == pytest.approx(written + 32 * 11 / 19200 + 0.010)
     assert decode_telegram(reply, from_drive=True).pnu == 1613
 
 
 async def test_read_times_out_at_the_deadline_when_nothing_comes() -> None:
-    clock = FakeClock()
+    clock = VirtualClock()
     transport = SimTransport(fc_line(clock, (1,)), clock)
     await transport.open()
     await transport.write(encode_telegram(control(9, START)))  # nobody at 9
     with pytest.raises(ReplyTimeout):
-        await transport.read(clock.now() + 0.1)
+        await clock.complete(transport.read(clock.now() + 0.1))
     assert clock.now() == pytest.approx(1000.1)
 
 
 async def test_a_reply_later_than_the_deadline_is_left_for_discard_input() -> None:
-    clock = FakeClock()
+    clock = VirtualClock()
     line = fc_line(clock, (1,))
     transport = SimTransport(line, clock)
     await transport.open()
     await transport.write(encode_telegram(control(1, START)))
     with pytest.raises(ReplyTimeout):
-        await transport.read(clock.now() + 0.005)  # before the reply can have arrived
+        # before the reply can have arrived
+        await clock.complete(transport.read(clock.now() + 0.005))
     assert transport.discard_input() == b""  # still on its way
-    await clock.sleep(0.1)
+    await clock.run_for(0.1)
     assert len(transport.discard_input()) == 8
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from fcmaster.clock import Clock
 from fcmaster.protocol.danfoss_fc import (
     FcFramer,
     Telegram,
@@ -39,7 +40,7 @@ def frames_in(data: bytes) -> list[bytes]:
 
 
 def fc_line(
-    clock: FakeClock,
+    clock: Clock,
     addresses: tuple[int, ...] = (1, 2, 3),
     *,
     baudrate: int = 19200,
