@@ -1,7 +1,8 @@
 """The `fcmaster` command line: parses arguments and maps the error tree to exit codes.
 
 Exit codes: 0 success; 1 the drive or the line failed the request; 2 bad input from the
-user (arguments, config, a malformed frame). Each subcommand's work lives in
+user (arguments, config, a malformed frame); 3 (``run`` only) a shutdown stop did not reach
+its drive. Each subcommand's work lives in
 ``fcmaster.subcommands`` and its options in :mod:`fcmaster.cli_arguments`; this module only
 dispatches and maps errors.
 """

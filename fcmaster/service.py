@@ -113,6 +113,9 @@ class Service:
         self._running_commands = 0
         self._no_commands = asyncio.Event()
         self._no_commands.set()
+        # "bus/drive" of each shutdown stop that ended without reaching its drive: the
+        # motor may still turn, and `fcmaster run` says so with exit status 3
+        self.stops_failed: list[str] = []
 
     def _default_transport(self, plan: LinePlan) -> Transport:
         if plan.port.startswith("sim://"):
@@ -203,12 +206,19 @@ class Service:
         """Ask :meth:`run` to shut down."""
         self._stopping.set()
 
+    def request_reload(self) -> None:
+        """SIGHUP: read the config file again (never a reason to exit)."""
+        log.info("config.reload_requested", path=str(self.config.path))
+
     async def run(self, *, install_signals: bool = True) -> None:
         """Run until :meth:`stop` or SIGTERM/SIGINT; then shut down in order."""
         loop = asyncio.get_running_loop()
         if install_signals:
             for sig in (signal.SIGTERM, signal.SIGINT):
                 loop.add_signal_handler(sig, self.stop)
+            # SIGHUP's default action ends the process on the spot (no on_shutdown, and
+            # systemd counts it a clean exit): here it asks for a reload.
+            loop.add_signal_handler(signal.SIGHUP, self.request_reload)
         try:
             async with AsyncExitStack() as stack:
                 for plan in self.config.lines:
@@ -257,7 +267,7 @@ class Service:
                 await self._commands_ended()
         finally:
             if install_signals:
-                for sig in (signal.SIGTERM, signal.SIGINT):
+                for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
                     loop.remove_signal_handler(sig)
         log.info("service.stopped")
 
@@ -323,6 +333,7 @@ class Service:
                     "service.shutdown_stop_unconfirmed", bus=bus, drive=drive, reason=result.reason
                 )
             elif result.outcome is not Outcome.DONE:
+                self.stops_failed.append(f"{bus}/{drive}")
                 log.error(
                     "service.shutdown_stop_failed",
                     bus=bus,
