@@ -80,6 +80,15 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return daemon.check(args.config)
 
 
+def _cmd_events(args: argparse.Namespace) -> int:
+    from fcmaster.subcommands import events
+
+    return events.run(
+        args.config, since=args.since, drive=args.drive, kind=args.kind, limit=args.limit,
+        as_json=args.json,
+    )  # fmt: skip
+
+
 def _cmd_modbus_map(args: argparse.Namespace) -> int:
     from fcmaster.subcommands import modbus_map
 
@@ -200,6 +209,7 @@ def _cmd_params(args: argparse.Namespace) -> int:
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "run": _cmd_run,
     "check": _cmd_check,
+    "events": _cmd_events,
     "modbus-map": _cmd_modbus_map,
     "scan": _cmd_scan,
     "status": _cmd_status,
@@ -222,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
     # Only the subcommand named gets its protocols' options (see build_parser).
     command = next((arg for arg in argv if not arg.startswith("-")), "")
     args = build_parser(command).parse_args(argv)
-    if args.command not in ("run", "decode", "check", "modbus-map", "ports"):
+    if args.command not in ("run", "decode", "check", "events", "modbus-map", "ports"):
         from fcmaster import logsetup
 
         logsetup.configure("warning")  # commissioning tools: only what needs attention

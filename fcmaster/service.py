@@ -49,11 +49,14 @@ from fcmaster.bus.watchdog import WatchdogAudit
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import Config
 from fcmaster.hub import Hub
+from fcmaster.journal import Journal
 from fcmaster.state import FleetState
+from fcmaster.store_settings import StoreSettings
 
 log = structlog.get_logger("fcmaster.service")
 
 STATS_INTERVAL_S = 5.0
+JOURNAL_MEMORY_MB = 16.0  # a file without a journal section: kept in memory, this big at most
 SHUTDOWN_STOP_TIMEOUT_S = 5.0
 SHUTDOWN_COMMANDS_S = 5.0  # commands on the wire at shutdown: time to get their outcome
 SHUTDOWN_ACTOR = "shutdown"
@@ -105,6 +108,11 @@ class Service:
         self.clock = clock or MonotonicClock()
         self.hub = Hub()
         self.fleet = FleetState(config.lines, emit=self.hub.publish, clock=self.clock)
+        self.journal = Journal(
+            config.journal or StoreSettings(max_mb=JOURNAL_MEMORY_MB),
+            self.hub,
+            wall=self.clock.wall,
+        )
         self._transport_factory = transport_factory or self._default_transport
         self.masters: dict[str, BusMaster] = {}
         self._audits: list[WatchdogAudit] = []  # one per line
@@ -202,6 +210,17 @@ class Service:
             if not self._running_commands:
                 self._no_commands.set()
 
+    async def events(
+        self,
+        *,
+        since: float | None = None,
+        kind: str | None = None,
+        drive: str | None = None,
+        limit: int = 100,
+    ) -> list[dict[str, Any]]:
+        """The journal's newest ``limit`` records matching the filters, oldest first."""
+        return await self.journal.read(since=since, kind=kind, drive=drive, limit=limit)
+
     def stop(self) -> None:
         """Ask :meth:`run` to shut down."""
         self._stopping.set()
@@ -221,6 +240,8 @@ class Service:
             loop.add_signal_handler(signal.SIGHUP, self.request_reload)
         try:
             async with AsyncExitStack() as stack:
+                # First in, last out: it sees the lines open and every command end.
+                await stack.enter_async_context(self.journal)
                 for plan in self.config.lines:
                     # Each commanded drive's own watchdog is read and judged when it comes
                     # online (fcmaster.bus.watchdog).
@@ -245,11 +266,9 @@ class Service:
                     settings = getattr(self.config, section)
                     if settings is not None:
                         await stack.enter_async_context(self._adapter(target, settings))
-                log.info(
-                    "service.started",
-                    lines=len(self.masters),
-                    drives=sum(len(p.drives) for p in self.config.lines),
-                )
+                lines, drives = len(self.masters), sum(len(p.drives) for p in self.config.lines)
+                log.info("service.started", lines=lines, drives=drives)
+                self.journal.note("start", lines=lines, drives=drives)
                 notify_systemd("READY=1")
                 stats = asyncio.create_task(self._publish_stats(), name="service.stats")
                 try:
@@ -257,6 +276,7 @@ class Service:
                 finally:
                     stats.cancel()
                 log.info("service.stopping", on_shutdown=self.config.model.on_shutdown)
+                self.journal.note("stop", on_shutdown=self.config.model.on_shutdown)
                 notify_systemd("STOPPING=1")
                 for audit in self._audits:
                     audit.stop()  # no more watchdog reads or writes: only what on_shutdown asks
