@@ -67,6 +67,7 @@ KINDS = (
     "reload", "start", "stop",
 )  # fmt: skip
 MAX_LIMIT = 1000
+CLOSE_S = 2.0  # at shutdown, for the writer to commit what is queued
 _JOURNAL_EVENTS = (
     CommandCompleted, ConditionChanged, AvailabilityChanged, LineChanged, DriveUpdated,
 )  # fmt: skip
@@ -184,7 +185,10 @@ class Journal:
             subscription.close()
             while (event := subscription.get_nowait()) is not None:  # what came last
                 self._keep(event)
-        await asyncio.to_thread(self.writer.close)
+        # The last records are written before the process ends. This waits (bounded) on the
+        # loop: every line is closed by now, and a thread handed this would leave the loop
+        # with nothing to wait for but it.
+        self.writer.close(CLOSE_S)
 
     def note(
         self, kind: str, *, bus: str | None = None, drive: str | None = None, **fields: Any

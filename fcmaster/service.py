@@ -36,6 +36,7 @@ from typing import Any
 
 import structlog
 
+from fcmaster import config as config_module
 from fcmaster.adapters.gateway import LineInfo
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
@@ -48,8 +49,10 @@ from fcmaster.bus.transport import Transport
 from fcmaster.bus.watchdog import WatchdogAudit
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import Config
+from fcmaster.errors import ConfigError
 from fcmaster.hub import Hub
 from fcmaster.journal import Journal
+from fcmaster.reload import Reloader
 from fcmaster.state import FleetState
 from fcmaster.store_settings import StoreSettings
 
@@ -102,6 +105,7 @@ class Service:
         clock: Clock | None = None,
         transport_factory: TransportFactory | None = None,
         demo: bool = False,
+        load: Callable[[Config], Config] | None = None,
     ) -> None:
         self.config = config
         self.demo = demo
@@ -117,6 +121,10 @@ class Service:
         self.masters: dict[str, BusMaster] = {}
         self._audits: list[WatchdogAudit] = []  # one per line
         self._serial_ports: dict[str, SerialTransport] = {}  # by bus, for their adapters
+        # what runs, so that a reload can close and open each alone
+        self._line_stacks: dict[str, AsyncExitStack] = {}
+        self._adapter_stacks: dict[str, AsyncExitStack] = {}
+        self.reloader = Reloader(self, load or _load_again)
         self._stopping = asyncio.Event()
         self._running_commands = 0
         self._no_commands = asyncio.Event()
@@ -226,8 +234,17 @@ class Service:
         self._stopping.set()
 
     def request_reload(self) -> None:
-        """SIGHUP: read the config file again (never a reason to exit)."""
+        """SIGHUP: read the config file again and apply what changed (see fcmaster.reload)."""
         log.info("config.reload_requested", path=str(self.config.path))
+        self.reloader.request()
+
+    def audit_of(self, bus: str) -> WatchdogAudit | None:
+        """Line ``bus``'s watchdog audit (None: no such line)."""
+        return next((audit for audit in self._audits if audit.plan.name == bus), None)
+
+    def config_status(self) -> dict[str, Any]:
+        """The running config: its hash, when it was loaded, and how the last reload went."""
+        return self.reloader.status()
 
     async def run(self, *, install_signals: bool = True) -> None:
         """Run until :meth:`stop` or SIGTERM/SIGINT; then shut down in order."""
@@ -242,30 +259,12 @@ class Service:
             async with AsyncExitStack() as stack:
                 # First in, last out: it sees the lines open and every command end.
                 await stack.enter_async_context(self.journal)
+                stack.push_async_callback(self._close_lines)
                 for plan in self.config.lines:
-                    # Each commanded drive's own watchdog is read and judged when it comes
-                    # online (fcmaster.bus.watchdog).
-                    audit = WatchdogAudit(plan, clock=self.clock, report=self.fleet.drive_watchdog)
-                    master = BusMaster(
-                        plan,
-                        codec=codec_for(plan),
-                        transport=self._transport_factory(plan),
-                        clock=self.clock,
-                        observer=audit.observing(self.fleet),
-                    )
-                    audit.attach(master.execute)
-                    self._audits.append(audit)
-                    self.masters[plan.name] = await stack.enter_async_context(master)
-                    stack.push_async_callback(audit.aclose)  # before its line closes
-                    serial = self._serial_ports.get(plan.name)
-                    if serial is not None and serial.in_use is not None:
-                        # Another fcmaster (or a tool) runs this line: a second master would
-                        # only garble both. Unlike a missing adapter, this is not waited out.
-                        raise serial.in_use
-                for section, target in ADAPTERS.items():
-                    settings = getattr(self.config, section)
-                    if settings is not None:
-                        await stack.enter_async_context(self._adapter(target, settings))
+                    await self.open_line(plan)
+                stack.push_async_callback(self._stop_adapters)
+                for section in ADAPTERS:
+                    await self.start_adapter(section)
                 lines, drives = len(self.masters), sum(len(p.drives) for p in self.config.lines)
                 log.info("service.started", lines=lines, drives=drives)
                 self.journal.note("start", lines=lines, drives=drives)
@@ -275,6 +274,7 @@ class Service:
                     await self._stopping.wait()
                 finally:
                     stats.cancel()
+                    await self.reloader.aclose()
                 log.info("service.stopping", on_shutdown=self.config.model.on_shutdown)
                 self.journal.note("stop", on_shutdown=self.config.model.on_shutdown)
                 notify_systemd("STOPPING=1")
@@ -290,6 +290,61 @@ class Service:
                 for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
                     loop.remove_signal_handler(sig)
         log.info("service.stopped")
+
+    async def open_line(self, plan: LinePlan) -> None:
+        """Start serving line ``plan`` (at start, or a line a reload adds or reopens)."""
+        stack = AsyncExitStack()
+        self._line_stacks[plan.name] = stack
+        # Each commanded drive's own watchdog is read and judged when it comes online
+        # (fcmaster.bus.watchdog).
+        audit = WatchdogAudit(plan, clock=self.clock, report=self.fleet.drive_watchdog)
+        master = BusMaster(
+            plan,
+            codec=codec_for(plan),
+            transport=self._transport_factory(plan),
+            clock=self.clock,
+            observer=audit.observing(self.fleet),
+        )
+        audit.attach(master.execute)
+        self._audits.append(audit)
+        stack.callback(self._audits.remove, audit)
+        self.masters[plan.name] = await stack.enter_async_context(master)
+        stack.callback(self.masters.pop, plan.name)
+        stack.push_async_callback(audit.aclose)  # before its line closes
+        serial = self._serial_ports.get(plan.name)
+        if serial is not None and serial.in_use is not None:
+            # Another fcmaster (or a tool) runs this line: a second master would only garble
+            # both. Unlike a missing adapter, this is not waited out.
+            raise serial.in_use
+
+    async def close_line(self, name: str) -> None:
+        """Stop serving line ``name`` (a reload removes or reopens it)."""
+        stack = self._line_stacks.pop(name, None)
+        if stack is not None:
+            await stack.aclose()
+        self._serial_ports.pop(name, None)
+
+    async def _close_lines(self) -> None:
+        for name in reversed(list(self._line_stacks)):
+            await self.close_line(name)
+
+    async def start_adapter(self, section: str) -> None:
+        """Start the adapter of config section ``section``, if the config has it."""
+        settings = getattr(self.config, section)
+        if settings is not None:
+            stack = AsyncExitStack()
+            await stack.enter_async_context(self._adapter(ADAPTERS[section], settings))
+            self._adapter_stacks[section] = stack
+
+    async def stop_adapter(self, section: str) -> None:
+        """Stop the adapter of config section ``section``, if it runs."""
+        stack = self._adapter_stacks.pop(section, None)
+        if stack is not None:
+            await stack.aclose()
+
+    async def _stop_adapters(self) -> None:
+        for section in reversed(list(self._adapter_stacks)):
+            await self.stop_adapter(section)
 
     def _adapter(self, target: str, settings: Any) -> AbstractAsyncContextManager[Any]:
         module, _, name = target.partition(":")
@@ -381,3 +436,10 @@ class Service:
 def _adapter_json(port: SerialTransport | None) -> dict[str, Any] | None:
     adapter = port.adapter if port is not None else None
     return adapter.to_json() if adapter is not None else None
+
+
+def _load_again(running: Config) -> Config:
+    """The running config's file read and judged again (ConfigError: refused)."""
+    if running.path is None:
+        raise ConfigError([("(file)", "this config was not read from a file")])
+    return config_module.load(running.path)

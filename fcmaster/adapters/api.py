@@ -24,7 +24,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException
 
 from fcmaster import __version__
-from fcmaster.adapters import metrics
+from fcmaster.adapters import config_metrics, metrics
 from fcmaster.adapters.api_requests import (
     Operator,
     StrictJsonRoute,
@@ -234,6 +234,11 @@ def create_app(
     async def buses(_: Viewer) -> Response:
         """Every line with its statistics (histogram buckets end at ``le: "+Inf"``)."""
         return json_response([line.to_json() for line in gateway.lines()])
+
+    @app.get("/api/v1/status", responses=_AUTH_ERRORS)
+    async def status(_: Viewer) -> Response:
+        """The daemon: its version and its config (hash, loaded_at, last_reload)."""
+        return json_response({"version": __version__, "config": gateway.config_status()})
 
     @app.get("/api/v1/events", responses=_AUTH_ERRORS)
     async def events(
@@ -455,6 +460,7 @@ def create_app(
             text = await metrics.render_async(
                 gateway.fleet.snapshot(), gateway.lines(), gateway.hub
             )
+            text += config_metrics.render(gateway.config_status())
             return Response(text, media_type=metrics.CONTENT_TYPE)
 
     @app.websocket("/api/v1/stream")

@@ -67,6 +67,9 @@ class Gateway(Protocol):
     async def execute(self, drive: str, command: Command) -> CommandResult:
         """Carry out ``command`` on drive ``drive``; one result, always."""
 
+    def config_status(self) -> dict[str, Any]:
+        """The running config: ``hash``, ``loaded_at``, ``last_reload``, ``reloads``."""
+
     async def events(
         self,
         *,

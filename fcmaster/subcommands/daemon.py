@@ -135,7 +135,13 @@ async def run(path: Path, *, demo: bool, http_listen: str | None = None) -> int:
         check_listen(config.model.http.listen, overridden=http_listen is not None)
     logsetup.configure(config.model.logging.level, config.model.logging.format)
     log.info("config.loaded", path=str(path), demo=demo, http_listen=http_listen)
-    service = Service(config, demo=demo)
+
+    def load_again(_: config_module.Config) -> config_module.Config:
+        # SIGHUP: the same file, with the same command-line override
+        again = config_module.load(path)
+        return again if http_listen is None else with_http_listen(again, http_listen)
+
+    service = Service(config, demo=demo, load=load_again)
     await service.run()
     if service.stops_failed:
         log.error("service.exit_stop_failed", drives=service.stops_failed, exit_status=3)

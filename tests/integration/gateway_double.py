@@ -95,6 +95,9 @@ class FakeGateway:
                 return line, self.frames.setdefault(name, FrameLog(self.clock.wall)).since(since)
         return None
 
+    def config_status(self) -> dict[str, Any]:
+        return {"hash": "0" * 16, "loaded_at": None, "last_reload": None, "reloads": {}}
+
     async def events(
         self,
         *,
