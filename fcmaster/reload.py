@@ -256,7 +256,8 @@ class Reloader:
         at = host.clock.wall()
         changes: list[str] = []
         try:
-            new = self._load(host.config)
+            # Off the loop: validating a big file takes long enough to delay a line's poll.
+            new = await asyncio.to_thread(self._load, host.config)
             problems = _cannot_apply(host.config, new)
         except ConfigError as exc:
             problems = [f"{where}: {why}" for where, why in exc.problems]
@@ -292,11 +293,13 @@ class Reloader:
         for line in changes.reopen:
             await host.close_line(line.name)
             host.fleet.forget(line.name, _gone(old[line.name], line))
+        for line in (*changes.reopen, *changes.open):
             host.fleet.replan(line)
-            await host.open_line(line)
-        for line in changes.open:
-            host.fleet.replan(line)
-            await host.open_line(line)
+            try:
+                await host.open_line(line)
+            except Exception as exc:  # e.g. its port in use by another program
+                problems.append(f"{line.name}: not opened: {exc}")
+                log.error("config.line_failed", bus=line.name, error=str(exc))
         for line in changes.replan:
             host.fleet.replan(line)  # before its first reply
             await host.masters[line.name].reconfigure(line)

@@ -308,14 +308,18 @@ class Service:
         audit.attach(master.execute)
         self._audits.append(audit)
         stack.callback(self._audits.remove, audit)
-        self.masters[plan.name] = await stack.enter_async_context(master)
-        stack.callback(self.masters.pop, plan.name)
-        stack.push_async_callback(audit.aclose)  # before its line closes
-        serial = self._serial_ports.get(plan.name)
-        if serial is not None and serial.in_use is not None:
-            # Another fcmaster (or a tool) runs this line: a second master would only garble
-            # both. Unlike a missing adapter, this is not waited out.
-            raise serial.in_use
+        try:
+            self.masters[plan.name] = await stack.enter_async_context(master)
+            stack.callback(self.masters.pop, plan.name)
+            stack.push_async_callback(audit.aclose)  # before its line closes
+            serial = self._serial_ports.get(plan.name)
+            if serial is not None and serial.in_use is not None:
+                # Another fcmaster (or a tool) runs this line: a second master would only
+                # garble both. Unlike a missing adapter, this is not waited out.
+                raise serial.in_use
+        except BaseException:
+            await self.close_line(plan.name)
+            raise
 
     async def close_line(self, name: str) -> None:
         """Stop serving line ``name`` (a reload removes or reopens it)."""
