@@ -155,6 +155,11 @@ def event_row(event: Event, at: float) -> Row | None:
     return Row(at, kind, event.bus, event.drive, json.dumps(fields, separators=(",", ":")))
 
 
+def _encode(item: tuple[float, Event]) -> Row | None:
+    at, event = item
+    return event_row(event, at)
+
+
 class Journal:
     """The fleet's journal: fed from the hub, written off the loop, read back by filters.
 
@@ -165,7 +170,7 @@ class Journal:
         self.settings = settings
         self._hub = hub
         self._wall = wall
-        self.writer = BackgroundWriter(_store(settings), name="journal", wall=wall)
+        self.writer = BackgroundWriter(_store(settings), name="journal", encode=_encode, wall=wall)
         self._subscription: Subscription | None = None
         self._task: asyncio.Task[None] | None = None
 
@@ -205,9 +210,9 @@ class Journal:
             self.writer.dropped += event.count
             log.warning("journal.events_dropped", count=event.count)
             return
-        row = event_row(event, self._wall())
-        if row is not None:
-            self.writer.put(row)
+        if isinstance(event, DriveUpdated) and "watchdog" not in event.changed:
+            return  # most of them: dropped here rather than queued
+        self.writer.put((self._wall(), event))  # made a row on the writer's thread
 
     async def read(
         self,

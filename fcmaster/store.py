@@ -18,8 +18,9 @@ under nine tenths of it; SQLite reuses the freed pages, so the file stops growin
 
 Nothing here may run on the event loop: a disk can stall for seconds. A
 :class:`BackgroundWriter` owns the store on a thread of its own. :meth:`~BackgroundWriter.put`
-only appends to a queue (never blocks, never raises), the thread commits what has gathered
-in one transaction, and a failure (a full disk, an unwritable path) is one logged error,
+only appends to a queue (never blocks, never raises); the thread makes rows of what was put
+(its ``encode``, so that even that work is off the loop) and commits what has gathered in
+one transaction, and a failure (a full disk, an unwritable path) is one logged error,
 repeated at most every few minutes; what could not be written is counted
 (``dropped``) and the queue stays bounded, so a dead disk never grows memory either.
 """
@@ -254,14 +255,18 @@ class BackgroundWriter:
         store: SequenceStore,
         *,
         name: str = "store",
+        encode: Callable[[Any], Row | None] | None = None,
         max_pending: int = MAX_PENDING,
         wall: Callable[[], float] = time.time,
     ) -> None:
         self.store = store
         self.name = name
+        # Items put are made into rows on the writer's thread, not on the caller's loop:
+        # ``encode`` (None: items are rows) gives an item's row, or None to keep nothing.
+        self._encode = encode
         self._max_pending = max_pending
         self._wall = wall
-        self._queue: queue.SimpleQueue[Row | None] = queue.SimpleQueue()
+        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._failing = False  # the last write failed
@@ -277,12 +282,15 @@ class BackgroundWriter:
         self._thread = threading.Thread(target=self._run, name=f"{self.name}.writer", daemon=True)
         self._thread.start()
 
-    def put(self, row: Row) -> None:
-        """Queue ``row`` for writing; returns at once (dropped and counted when full)."""
+    def put(self, item: Any) -> None:
+        """Queue ``item`` (a row, or what ``encode`` takes) for writing; returns at once.
+
+        Past ``max_pending`` waiting, the item is dropped and counted.
+        """
         if self._queue.qsize() >= self._max_pending:
             self.dropped += 1
             return
-        self._queue.put(row)
+        self._queue.put(item)
 
     def close(self, timeout_s: float = 5.0) -> None:
         """Write what is queued, stop the thread (bounded by ``timeout_s``), close the store."""
@@ -305,7 +313,7 @@ class BackgroundWriter:
         stopping = False
         while not stopping:
             first = self._queue.get()
-            batch: list[Row] = []
+            batch: list[Any] = []
             if first is None:
                 stopping = True
             else:
@@ -320,9 +328,27 @@ class BackgroundWriter:
                 else:
                     batch.append(row)
             if batch:
-                self._write(batch)
+                self._write(self._rows(batch))
+
+    def _rows(self, items: list[Any]) -> list[Row]:
+        encode = self._encode
+        if encode is None:
+            return items
+        rows: list[Row] = []
+        for item in items:
+            try:
+                row = item if isinstance(item, Row) else encode(item)
+            except Exception as exc:  # a bug: the item is lost, the writer goes on
+                self.dropped += 1
+                log.error("store.encode_failed", store=self.name, error=repr(exc))
+                continue
+            if row is not None:
+                rows.append(row)
+        return rows
 
     def _write(self, batch: list[Row]) -> None:
+        if not batch:
+            return
         with self._lock:
             try:
                 if not self.store.is_open:
