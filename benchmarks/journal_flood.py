@@ -27,7 +27,6 @@ import argparse
 import asyncio
 import os
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -36,7 +35,6 @@ from typing import Any
 import results_file
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
-from fcmaster.clock import new_event_loop
 from fcmaster.config import parse
 from fcmaster.hub import Hub
 from fcmaster.journal import Journal
@@ -174,7 +172,4 @@ if __name__ == "__main__":
         "--out", type=Path, default=Path(__file__).parent / "results" / "journal_flood.json"
     )
     arguments = parser.parse_args()
-    with asyncio.Runner(loop_factory=new_event_loop) as runner:
-        figures = runner.run(main(arguments))
-    results_file.write(arguments.out, figures)
-    print(f"wrote {arguments.out}", file=sys.stderr)
+    results_file.run_and_write(main(arguments), arguments.out)
