@@ -215,6 +215,14 @@ class Reloader:
         self.counts = {"applied": 0, "refused": 0}
         self._task: asyncio.Task[None] | None = None
         self._again = False
+        self._ready = False  # until every line and adapter has started, requests wait
+        self._asked = False
+
+    def ready(self) -> None:
+        """The service has started: a reload asked for meanwhile runs now."""
+        self._ready = True
+        if self._asked:
+            self.request()
 
     def status(self) -> dict[str, Any]:
         """``config`` of ``GET /api/v1/status``."""
@@ -227,6 +235,9 @@ class Reloader:
 
     def request(self) -> None:
         """Reload soon; a request during a reload makes one more after it."""
+        if not self._ready:
+            self._asked = True
+            return
         if self._task is not None and not self._task.done():
             self._again = True
             return

@@ -269,6 +269,7 @@ class Service:
                 log.info("service.started", lines=lines, drives=drives)
                 self.journal.note("start", lines=lines, drives=drives)
                 notify_systemd("READY=1")
+                self.reloader.ready()
                 stats = asyncio.create_task(self._publish_stats(), name="service.stats")
                 try:
                     await self._stopping.wait()
