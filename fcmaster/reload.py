@@ -30,9 +30,9 @@ import asyncio
 import dataclasses
 import hashlib
 import socket
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, Protocol
 
 import structlog
@@ -46,13 +46,13 @@ from fcmaster.config import Config
 from fcmaster.drive_state import rfc3339
 from fcmaster.errors import ConfigError
 from fcmaster.journal import Journal
+from fcmaster.offloop import run_off_loop
 from fcmaster.state import FleetState
 
 log = structlog.get_logger("fcmaster.reload")
 
 ADAPTER_SECTIONS = ("http", "mqtt", "modbus")
 STOP_TIMEOUT_S = 5.0  # for the stops of drives that leave (on_shutdown: stop)
-PREPARE_SWITCH_S = 0.0005  # the interpreter's switch interval while a file is judged
 
 
 @dataclass(slots=True)
@@ -270,7 +270,7 @@ class Reloader:
         changes: list[str] = []
         running = host.config
         try:
-            new, plan, fingerprint = await asyncio.to_thread(self._prepare, running)
+            new, plan, fingerprint = await run_off_loop(partial(self._prepare, running))
             problems = _cannot_apply(running, new)
         except ConfigError as exc:
             problems = [f"{where}: {why}" for where, why in exc.problems]
@@ -292,20 +292,9 @@ class Reloader:
         return self.last
 
     def _prepare(self, running: Config) -> tuple[Config, Changes, str]:
-        """On a worker thread: the file read and judged, compared, fingerprinted.
-
-        Validating a file is tens of milliseconds of Python, and it holds the interpreter
-        lock in slices of the switch interval (5 ms), each of which delays every wake-up of
-        the loop that serves the lines; with a short interval meanwhile, the loop waits a
-        fraction of a millisecond for its turn instead.
-        """
-        interval = sys.getswitchinterval()
-        sys.setswitchinterval(PREPARE_SWITCH_S)
-        try:
-            new = self._load(running)
-            return new, compare(running, new), config_hash(new)
-        finally:
-            sys.setswitchinterval(interval)
+        """The file read and judged, compared, fingerprinted (tens of ms: off the loop)."""
+        new = self._load(running)
+        return new, compare(running, new), config_hash(new)
 
     async def _apply(self, new: Config, changes: Changes) -> list[str]:
         """Apply ``changes``; what could not be done (the rest is done regardless)."""

@@ -20,7 +20,6 @@ from typing import Any
 
 import httpx
 
-from fcmaster.bus.master import BACKOFF_FIRST_S
 from fcmaster.clock import MonotonicClock
 from fcmaster.protocol.danfoss_fc.framer import FcFramer
 from fcmaster.protocol.danfoss_fc.profile import ControlWord
@@ -45,15 +44,15 @@ buses:
     baudrate: 19200
     drives:
       - {{name: fan-1, address: 5}}
+      - {{name: fan-2, address: 6}}
+      - {{name: fan-3, address: 7}}
 http:
   listen: 127.0.0.1:{http}
   anonymous: viewer
 metrics: {{enabled: true}}
 """
 PUMP_2 = "      - {name: pump-2, address: 2}"
-# A reopened line waits at least this long before its port is opened again: a gap this long
-# in a line's polls is a reopen, never its normal pace (a poll at 19200 baud takes ~15 ms).
-REOPEN_GAP_S = BACKOFF_FIRST_S * 0.8
+SOUTH = (5, 6, 7)
 
 
 class Wire:
@@ -70,12 +69,18 @@ class Wire:
                 telegram = decode_telegram(piece.data, from_drive=False)
                 self.telegrams.append((time.monotonic(), telegram.address, telegram.pcd1))
 
+    def addresses(self, start: float, end: float) -> list[int]:
+        return [a for t, a, _ in self.telegrams if start <= t <= end]
+
     def between(self, start: float, end: float, address: int) -> list[tuple[float, int]]:
         return [(t, word) for t, a, word in self.telegrams if start <= t <= end and a == address]
 
 
-def _max_gap(times: list[float]) -> float:
-    return max((b - a for a, b in itertools.pairwise(times)), default=float("inf"))
+def _polled_in_turn(addresses: list[int], cycle: tuple[int, ...]) -> bool:
+    """Whether ``addresses`` go round ``cycle`` without a break (a reopen starts it over)."""
+    return len(addresses) > 2 * len(cycle) and all(
+        cycle[(cycle.index(a) + 1) % len(cycle)] == b for a, b in itertools.pairwise(addresses)
+    )
 
 
 def _runs(word: int) -> bool:
@@ -91,7 +96,7 @@ async def _lines(tmp_path: Path) -> AsyncIterator[dict[str, Wire]]:
     async with AsyncExitStack() as stack:
         for name, drives in (
             ("north", [(1, DriveSettings(running_hz=30.0)), (2, DriveSettings())]),
-            ("south", [(5, DriveSettings())]),
+            ("south", [(a, DriveSettings()) for a in SOUTH]),
         ):
             line = build_line(LineSettings(name=name, baudrate=19200), drives, clock=clock)
             wire = wires[name] = Wire()
@@ -113,6 +118,16 @@ def _write(config: Path, tmp_path: Path, http: int, *, more: str = "") -> None:
             north=tmp_path / "ttyNORTH", south=tmp_path / "ttySOUTH", http=http, more=more
         )
     )
+
+
+async def _heard(wire: Wire, after: float, count: int, daemon: Child) -> float:
+    """Wait until ``count`` telegrams came on ``wire`` after ``after``: when the last came."""
+
+    async def enough() -> float | None:
+        times = [t for t, _, _ in wire.telegrams if t > after]
+        return times[count - 1] if len(times) >= count else None
+
+    return await until(enough, f"{count} telegrams", alive=daemon)
 
 
 async def _reloaded(client: httpx.AsyncClient, daemon: Child, count: int) -> dict[str, Any]:
@@ -143,12 +158,13 @@ async def test_a_drive_added_to_one_line_leaves_the_other_polling_and_nothing_jo
             return drives if all(d["online"] for d in drives.values()) else None
 
         before = await until(online, "drives online", alive=daemon)
-        assert set(before) == {"pump-1", "fan-1"}
+        assert set(before) == {"pump-1", "fan-1", "fan-2", "fan-3"}
         assert before["pump-1"]["running"] is True  # found running: adopted as it is
         first = (await get_json(client, "/api/v1/status"))["config"]
         assert first["last_reload"] is None
 
-        await asyncio.sleep(3.0)  # the line's own pace, before the reload
+        start = time.monotonic()
+        await _heard(wires["south"], start, 30, daemon)  # south going round, before the reload
         _write(config, tmp_path, http, more=PUMP_2)
         sighup = time.monotonic()
         status = await _reloaded(client, daemon, 1)
@@ -156,20 +172,16 @@ async def test_a_drive_added_to_one_line_leaves_the_other_polling_and_nothing_jo
         assert status["last_reload"]["changes"] == ["north: drive pump-2 added"]
         assert status["hash"] != first["hash"]
         after = await until(online, "pump-2 online", alive=daemon)
-        assert set(after) == {"pump-1", "pump-2", "fan-1"}
-        settled = time.monotonic() + 1.0
-        await asyncio.sleep(1.0)  # the polls after the reload, as the wire carried them
+        assert set(after) == {"pump-1", "pump-2", "fan-1", "fan-2", "fan-3"}
+        settled = await _heard(wires["south"], time.monotonic(), 30, daemon)
+        await _heard(wires["north"], time.monotonic(), 4, daemon)
 
-        # The longest wait between two polls of a line while the reload was applied, beside
-        # the longest in the 3 s before it (the machine's own pace, under load too).
-        for name, address in (("south", 5), ("north", 1)):
-            wire = wires[name]
-            normal = _max_gap([t for t, _ in wire.between(sighup - 3.0, sighup, address)])
-            during = _max_gap([t for t, _ in wire.between(sighup - normal, settled, address)])
-            assert during <= max(2 * normal, normal + 0.05), (name, during, normal)
-        north = wires["north"].between(sighup - 3.0, settled, 1)
+        # South's polls went round its drives without a break, and its port stayed open;
+        # the figures of the gaps are benchmarks/reload_gap.py's.
+        assert _polled_in_turn(wires["south"].addresses(start, settled), SOUTH)
+        north = wires["north"].between(start, time.monotonic(), 1)
         assert all(_runs(word) for _, word in north), "pump-1 was told something but run"
-        assert wires["north"].between(sighup, settled, 2)  # the new drive is polled
+        assert wires["north"].between(sighup, time.monotonic(), 2)  # the new drive is polled
         events = [(e["event"], e.get("bus")) for e in daemon.log_events()]
         assert events.count(("bus.opened", "south")) == 1  # never reopened
         assert events.count(("bus.opened", "north")) == 1
@@ -185,9 +197,8 @@ async def test_a_drive_added_to_one_line_leaves_the_other_polling_and_nothing_jo
         assert any("buses[1].drives[0].address" in p for p in last["problems"]), last
         assert status["hash"] == (await get_json(client, "/api/v1/status"))["config"]["hash"]
         assert status["reloads"] == {"applied": 1, "refused": 1}
-        await asyncio.sleep(0.5)
-        south = [t for t, _ in wires["south"].between(broken_at, time.monotonic(), 5)]
-        assert len(south) > 10
+        heard = await _heard(wires["south"], broken_at, 30, daemon)
+        assert _polled_in_turn(wires["south"].addresses(broken_at, heard), SOUTH)
         assert all(d["online"] for d in await get_json(client, "/api/v1/drives"))
         refused = [e for e in daemon.log_events() if e["event"] == "config.reload_refused"]
         assert refused[0]["level"] == "error"
@@ -214,8 +225,9 @@ async def test_a_changed_http_listener_moves_and_the_lines_stay(tmp_path: Path) 
             return all(d["online"] for d in await get_json(old, "/api/v1/drives"))
 
         await until(online, "drives online", alive=daemon)
+        start = time.monotonic()
+        await _heard(wires["south"], start, 30, daemon)
         _write(config, tmp_path, moved)
-        sighup = time.monotonic()
         daemon.process.send_signal(signal.SIGHUP)
 
         async def answered() -> dict[str, Any] | None:
@@ -230,6 +242,9 @@ async def test_a_changed_http_listener_moves_and_the_lines_stay(tmp_path: Path) 
             pass
         else:
             raise AssertionError("the old address still answers")
-        south = [t for t, _ in wires["south"].between(sighup - 0.5, time.monotonic(), 5)]
-        assert _max_gap(south) < REOPEN_GAP_S  # polled on: never closed and opened again
-        assert all(d["online"] for d in await get_json(new, "/api/v1/drives"))
+        heard = await _heard(wires["south"], time.monotonic(), 30, daemon)
+        assert _polled_in_turn(wires["south"].addresses(start, heard), SOUTH)
+        events = [(e["event"], e.get("bus")) for e in daemon.log_events()]
+        assert events.count(("bus.opened", "south")) == 1  # never closed and opened again
+        assert events.count(("bus.opened", "north")) == 1
+        assert all(d["online"] for d in await get_json(new, "/api/v1/drives")), daemon.tail(40)
