@@ -1,4 +1,4 @@
-"""Long pure-Python work (validating a config file, building the HTTP app) kept off the loop.
+"""Long pure-Python work kept off the loop: a config validated, the HTTP app built, a journal.
 
 The loop that serves the lines must wake within a fraction of a millisecond of its timers
 and of a reply's arrival. Work of tens of milliseconds run on it delays every line by that
@@ -12,9 +12,10 @@ millisecond for its turn instead (0.6-3 ms late, measured the same way).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -31,6 +32,13 @@ async def run_off_loop(work: Callable[[], T]) -> T:
 
 
 def _briskly(work: Callable[[], T]) -> T:
+    with brisk():
+        return work()
+
+
+@contextlib.contextmanager
+def brisk() -> Iterator[None]:
+    """On a worker thread: the switch interval short while inside (nested and concurrent)."""
     global _running, _saved
     with _lock:
         if not _running:  # the first of several at once saves, the last restores
@@ -38,7 +46,7 @@ def _briskly(work: Callable[[], T]) -> T:
             sys.setswitchinterval(SWITCH_S)
         _running += 1
     try:
-        return work()
+        yield
     finally:
         with _lock:
             _running -= 1

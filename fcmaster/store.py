@@ -39,6 +39,7 @@ from typing import Any, TypeVar
 
 import structlog
 
+from fcmaster.offloop import brisk
 from fcmaster.store_settings import MEMORY
 
 log = structlog.get_logger("fcmaster.store")
@@ -328,7 +329,8 @@ class BackgroundWriter:
                 else:
                     batch.append(row)
             if batch:
-                self._write(self._rows(batch))
+                with brisk():  # the loop that serves the lines gets the interpreter at once
+                    self._write(self._rows(batch))
 
     def _rows(self, items: list[Any]) -> list[Row]:
         encode = self._encode
