@@ -14,6 +14,7 @@ import platform
 import subprocess
 import sys
 import time
+from collections.abc import Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,18 @@ def write(path: Path, results: dict[str, Any]) -> None:
     """``results`` as indented strict JSON at ``path`` (NaN, a figure with no samples: null)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(_finite(results), indent=2, allow_nan=False) + "\n")
+
+
+def run_and_write(figures: Coroutine[Any, Any, dict[str, Any]], path: Path) -> None:
+    """Run ``figures`` on fcmaster's event loop; write what it returns at ``path``."""
+    import asyncio
+
+    from fcmaster.clock import new_event_loop
+
+    with asyncio.Runner(loop_factory=new_event_loop) as runner:
+        found = runner.run(figures)
+    write(path, found)
+    print(f"wrote {path}", file=sys.stderr)
 
 
 def _git(*args: str) -> str:

@@ -1,7 +1,8 @@
 """The `fcmaster` command line: parses arguments and maps the error tree to exit codes.
 
 Exit codes: 0 success; 1 the drive or the line failed the request; 2 bad input from the
-user (arguments, config, a malformed frame). Each subcommand's work lives in
+user (arguments, config, a malformed frame); 3 (``run`` only) a shutdown stop did not reach
+its drive. Each subcommand's work lives in
 ``fcmaster.subcommands`` and its options in :mod:`fcmaster.cli_arguments`; this module only
 dispatches and maps errors.
 """
@@ -84,6 +85,15 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from fcmaster.subcommands import daemon
 
     return daemon.check(args.config)
+
+
+def _cmd_events(args: argparse.Namespace) -> int:
+    from fcmaster.subcommands import events
+
+    return events.run(
+        args.config, since=args.since, drive=args.drive, kind=args.kind, limit=args.limit,
+        as_json=args.json,
+    )  # fmt: skip
 
 
 def _cmd_modbus_map(args: argparse.Namespace) -> int:
@@ -222,6 +232,7 @@ def _cmd_params(args: argparse.Namespace) -> int:
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "run": _cmd_run,
     "check": _cmd_check,
+    "events": _cmd_events,
     "modbus-map": _cmd_modbus_map,
     "scan": _cmd_scan,
     "status": _cmd_status,
@@ -244,7 +255,7 @@ def main(argv: list[str] | None = None) -> int:
     # Only the subcommand named gets its protocols' options (see build_parser).
     command = next((arg for arg in argv if not arg.startswith("-")), "")
     args = build_parser(command).parse_args(argv)
-    if args.command not in ("run", "decode", "check", "modbus-map", "ports"):
+    if args.command not in ("run", "decode", "check", "events", "modbus-map", "ports"):
         from fcmaster import logsetup
 
         # commissioning tools: only what needs attention, in words even into a pipe or file;

@@ -178,6 +178,16 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     check = commands.add_parser("check", help="validate a config file")
     check.add_argument("--config", type=Path, required=True)
 
+    events = commands.add_parser(
+        "events", help="the journal: commands, alarms, starts, newest last"
+    )
+    events.add_argument("--config", type=Path, required=True)
+    events.add_argument("--since", help="a time (2026-11-27T08:00:00Z) or an age (30m, 2h, 7d)")
+    events.add_argument("--drive", help="one drive's records only")
+    events.add_argument("--kind", help="command, alarm, warning, online, offline, watchdog, …")
+    events.add_argument("--limit", type=int, default=1000, help="the newest this many (1-1000)")
+    events.add_argument("--json", action="store_true", help="print JSON")
+
     modbus_map = commands.add_parser(
         "modbus-map", help="the Modbus TCP register map of a config, for PLC programmers"
     )

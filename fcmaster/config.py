@@ -47,6 +47,7 @@ from fcmaster.config_hints import in_words
 from fcmaster.config_modbus import check_modbus, modbus_units
 from fcmaster.config_sections import (
     HttpModel,
+    JournalModel,
     LoggingModel,
     MetricsModel,
     ModbusModel,
@@ -61,6 +62,7 @@ from fcmaster.config_yaml import read, substitute
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.protocol.registry import DEFAULT, NAMES, line_keys, spec_for
 from fcmaster.protocol.spec import LineKey
+from fcmaster.store_settings import MEMORY, StoreSettings
 
 __all__ = [
     "BusFields",
@@ -69,6 +71,7 @@ __all__ = [
     "ConfigModel",
     "DriveModel",
     "HttpModel",
+    "JournalModel",
     "LoggingModel",
     "MetricsModel",
     "ModbusModel",
@@ -174,6 +177,7 @@ class ConfigModel(_Model):
     mqtt: MqttModel | None = None
     modbus: ModbusModel | None = None
     metrics: MetricsModel | None = None
+    journal: JournalModel | None = None
     logging: LoggingModel = LoggingModel()
     on_shutdown: Literal["hold", "stop"] = "hold"
     # The most a shutdown waits for stops and commands to end; within it, only as long as
@@ -209,6 +213,19 @@ class Config:
         return (
             None if self.model.modbus is None else self.model.modbus.settings(self.modbus_units())
         )
+
+    @property
+    def journal(self) -> StoreSettings | None:
+        """The journal's settings; a relative path is taken from the config file's folder."""
+        model = self.model.journal
+        if model is None:
+            return None
+        path = model.path
+        if path is not None and path != MEMORY and self.path is not None:
+            path = str(Path(self.path).parent / path)  # an absolute path stays as it is
+        elif path == MEMORY:
+            path = None
+        return StoreSettings(path=path, max_mb=model.max_mb, max_days=model.max_days)
 
     def modbus_units(self) -> dict[str, int]:
         """Each drive's Modbus unit id by name; ConfigError if two drives would share one.

@@ -180,3 +180,11 @@ class LoggingModel(StrictModel):
 
     level: Literal["debug", "info", "warning", "error"] = "info"
     format: Literal["auto", "json", "console"] = "auto"
+
+
+class JournalModel(StrictModel):
+    """The journal of commands, alarms and lifecycle events (SQLite; no path: in memory)."""
+
+    path: str | None = Field(default=None, min_length=1)
+    max_mb: float = Field(default=100.0, gt=0)
+    max_days: float = Field(default=90.0, gt=0)

@@ -42,6 +42,7 @@ from typing import Any
 
 import structlog
 
+from fcmaster import config as config_module
 from fcmaster.adapters.gateway import LineInfo
 from fcmaster.bus.audit import audit, command_values
 from fcmaster.bus.codecs import codec_for
@@ -53,8 +54,12 @@ from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.watchdog import WatchdogAudit
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import Config
+from fcmaster.errors import ConfigError
 from fcmaster.hub import Hub
+from fcmaster.journal import Journal
+from fcmaster.reload import Reloader
 from fcmaster.state import FleetState
+from fcmaster.store_settings import StoreSettings
 from fcmaster.transport.echo import EchoCancellingTransport
 from fcmaster.transport.pipe import Transport
 from fcmaster.transport.serial import SerialTransport
@@ -62,6 +67,7 @@ from fcmaster.transport.serial import SerialTransport
 log = structlog.get_logger("fcmaster.service")
 
 STATS_INTERVAL_S = 5.0
+JOURNAL_MEMORY_MB = 16.0  # a file without a journal section: kept in memory, this big at most
 SHUTDOWN_STOP_TIMEOUT_S = 5.0  # the least a shutdown waits for stops and commands to end
 SHUTDOWN_ACTOR = "shutdown"
 SHUTTING_DOWN = "fcmaster is shutting down"
@@ -106,20 +112,33 @@ class Service:
         clock: Clock | None = None,
         transport_factory: TransportFactory | None = None,
         demo: bool = False,
+        load: Callable[[Config], Config] | None = None,
     ) -> None:
         self.config = config
         self.demo = demo
         self.clock = clock or MonotonicClock()
         self.hub = Hub()
         self.fleet = FleetState(config.lines, emit=self.hub.publish, clock=self.clock)
+        self.journal = Journal(
+            config.journal or StoreSettings(max_mb=JOURNAL_MEMORY_MB),
+            self.hub,
+            wall=self.clock.wall,
+        )
         self._transport_factory = transport_factory or self._default_transport
         self.masters: dict[str, BusMaster] = {}
         self._audits: list[WatchdogAudit] = []  # one per line
         self._serial_ports: dict[str, SerialTransport] = {}  # by bus, for their adapters
+        # what runs, so that a reload can close and open each alone
+        self._line_stacks: dict[str, AsyncExitStack] = {}
+        self._adapter_stacks: dict[str, AsyncExitStack] = {}
+        self.reloader = Reloader(self, load or _load_again)
         self._stopping = asyncio.Event()
         self._running_commands = 0
         self._no_commands = asyncio.Event()
         self._no_commands.set()
+        # "bus/drive" of each shutdown stop that ended without reaching its drive: the
+        # motor may still turn, and `fcmaster run` says so with exit status 3
+        self.stops_failed: list[str] = []
 
     def _default_transport(self, plan: LinePlan) -> Transport:
         if plan.port.startswith("sim://"):
@@ -209,9 +228,33 @@ class Service:
             if not self._running_commands:
                 self._no_commands.set()
 
+    async def events(
+        self,
+        *,
+        since: float | None = None,
+        kind: str | None = None,
+        drive: str | None = None,
+        limit: int = 100,
+    ) -> list[dict[str, Any]]:
+        """The journal's newest ``limit`` records matching the filters, oldest first."""
+        return await self.journal.read(since=since, kind=kind, drive=drive, limit=limit)
+
     def stop(self) -> None:
         """Ask :meth:`run` to shut down."""
         self._stopping.set()
+
+    def request_reload(self) -> None:
+        """SIGHUP: read the config file again and apply what changed (see fcmaster.reload)."""
+        log.info("config.reload_requested", path=str(self.config.path))
+        self.reloader.request()
+
+    def audit_of(self, bus: str) -> WatchdogAudit | None:
+        """Line ``bus``'s watchdog audit (None: no such line)."""
+        return next((audit for audit in self._audits if audit.plan.name == bus), None)
+
+    def config_status(self) -> dict[str, Any]:
+        """The running config: its hash, when it was loaded, and how the last reload went."""
+        return self.reloader.status()
 
     async def run(self, *, install_signals: bool = True) -> None:
         """Run until :meth:`stop` or SIGTERM/SIGINT; then shut down in order."""
@@ -219,44 +262,32 @@ class Service:
         if install_signals:
             for sig in (signal.SIGTERM, signal.SIGINT):
                 loop.add_signal_handler(sig, self.stop)
+            # SIGHUP's default action ends the process on the spot (no on_shutdown, and
+            # systemd counts it a clean exit): here it asks for a reload.
+            loop.add_signal_handler(signal.SIGHUP, self.request_reload)
         try:
             async with AsyncExitStack() as stack:
+                # First in, last out: it sees the lines open and every command end.
+                await stack.enter_async_context(self.journal)
+                stack.push_async_callback(self._close_lines)
                 for plan in self.config.lines:
-                    # Each commanded drive's own watchdog is read and judged when it comes
-                    # online (fcmaster.bus.watchdog).
-                    audit = WatchdogAudit(plan, clock=self.clock, report=self.fleet.drive_watchdog)
-                    master = BusMaster(
-                        plan,
-                        codec=codec_for(plan),
-                        transport=self._transport_factory(plan),
-                        clock=self.clock,
-                        observer=audit.observing(self.fleet),
-                    )
-                    audit.attach(master.execute)
-                    self._audits.append(audit)
-                    self.masters[plan.name] = await stack.enter_async_context(master)
-                    stack.push_async_callback(audit.aclose)  # before its line closes
-                    serial = self._serial_ports.get(plan.name)
-                    if serial is not None and serial.in_use is not None:
-                        # Another fcmaster (or a tool) runs this line: a second master would
-                        # only garble both. Unlike a missing adapter, this is not waited out.
-                        raise serial.in_use
-                for section, target in ADAPTERS.items():
-                    settings = getattr(self.config, section)
-                    if settings is not None:
-                        await stack.enter_async_context(self._adapter(target, settings))
-                log.info(
-                    "service.started",
-                    lines=len(self.masters),
-                    drives=sum(len(p.drives) for p in self.config.lines),
-                )
+                    await self.open_line(plan)
+                stack.push_async_callback(self._stop_adapters)
+                for section in ADAPTERS:
+                    await self.start_adapter(section)
+                lines, drives = len(self.masters), sum(len(p.drives) for p in self.config.lines)
+                log.info("service.started", lines=lines, drives=drives)
+                self.journal.note("start", lines=lines, drives=drives)
                 notify_systemd("READY=1")
+                self.reloader.ready()
                 stats = asyncio.create_task(self._publish_stats(), name="service.stats")
                 try:
                     await self._stopping.wait()
                 finally:
                     stats.cancel()
+                    await self.reloader.aclose()
                 log.info("service.stopping", on_shutdown=self.config.model.on_shutdown)
+                self.journal.note("stop", on_shutdown=self.config.model.on_shutdown)
                 notify_systemd("STOPPING=1")
                 for audit in self._audits:
                     audit.stop()  # no more watchdog reads or writes: only what on_shutdown asks
@@ -272,9 +303,68 @@ class Service:
                     await master.close()
         finally:
             if install_signals:
-                for sig in (signal.SIGTERM, signal.SIGINT):
+                for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
                     loop.remove_signal_handler(sig)
         log.info("service.stopped")
+
+    async def open_line(self, plan: LinePlan) -> None:
+        """Start serving line ``plan`` (at start, or a line a reload adds or reopens)."""
+        stack = AsyncExitStack()
+        self._line_stacks[plan.name] = stack
+        # Each commanded drive's own watchdog is read and judged when it comes online
+        # (fcmaster.bus.watchdog).
+        audit = WatchdogAudit(plan, clock=self.clock, report=self.fleet.drive_watchdog)
+        master = BusMaster(
+            plan,
+            codec=codec_for(plan),
+            transport=self._transport_factory(plan),
+            clock=self.clock,
+            observer=audit.observing(self.fleet),
+        )
+        audit.attach(master.execute)
+        self._audits.append(audit)
+        stack.callback(self._audits.remove, audit)
+        try:
+            self.masters[plan.name] = await stack.enter_async_context(master)
+            stack.callback(self.masters.pop, plan.name)
+            stack.push_async_callback(audit.aclose)  # before its line closes
+            serial = self._serial_ports.get(plan.name)
+            if serial is not None and serial.in_use is not None:
+                # Another fcmaster (or a tool) runs this line: a second master would only
+                # garble both. Unlike a missing adapter, this is not waited out.
+                raise serial.in_use
+        except BaseException:
+            await self.close_line(plan.name)
+            raise
+
+    async def close_line(self, name: str) -> None:
+        """Stop serving line ``name`` (a reload removes or reopens it)."""
+        stack = self._line_stacks.pop(name, None)
+        if stack is not None:
+            await stack.aclose()
+        self._serial_ports.pop(name, None)
+
+    async def _close_lines(self) -> None:
+        for name in reversed(list(self._line_stacks)):
+            await self.close_line(name)
+
+    async def start_adapter(self, section: str) -> None:
+        """Start the adapter of config section ``section``, if the config has it."""
+        settings = getattr(self.config, section)
+        if settings is not None:
+            stack = AsyncExitStack()
+            await stack.enter_async_context(self._adapter(ADAPTERS[section], settings))
+            self._adapter_stacks[section] = stack
+
+    async def stop_adapter(self, section: str) -> None:
+        """Stop the adapter of config section ``section``, if it runs."""
+        stack = self._adapter_stacks.pop(section, None)
+        if stack is not None:
+            await stack.aclose()
+
+    async def _stop_adapters(self) -> None:
+        for section in reversed(list(self._adapter_stacks)):
+            await self.stop_adapter(section)
 
     def _adapter(self, target: str, settings: Any) -> AbstractAsyncContextManager[Any]:
         module, _, name = target.partition(":")
@@ -356,6 +446,7 @@ class Service:
                     "service.shutdown_stop_unconfirmed", bus=bus, drive=drive, reason=result.reason
                 )
             elif result.outcome is not Outcome.DONE:
+                self.stops_failed.append(f"{bus}/{drive}")
                 log.error(
                     "service.shutdown_stop_failed",
                     bus=bus,
@@ -387,3 +478,10 @@ class Service:
 def _adapter_json(port: SerialTransport | None) -> dict[str, Any] | None:
     adapter = port.adapter if port is not None else None
     return adapter.to_json() if adapter is not None else None
+
+
+def _load_again(running: Config) -> Config:
+    """The running config's file read and judged again (ConfigError: refused)."""
+    if running.path is None:
+        raise ConfigError([("(file)", "this config was not read from a file")])
+    return config_module.load(running.path)

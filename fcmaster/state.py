@@ -230,20 +230,45 @@ class FleetState:
         self._monitored: dict[str, frozenset[str] | None] = {}
         self._nominal_hz: dict[str, float] = {}  # for a publication that no reply made
         for line in lines:
-            for drive in line.drives:
+            self.replan(line)
+
+    def replan(self, line: LinePlan) -> None:
+        """Know the drives of ``line`` as it now says (at start, and at a reload).
+
+        A drive new here, or at another address or under other control, starts as a new
+        snapshot (offline until it answers); any other keeps its snapshot and takes its new
+        monitor list and nominal frequency. Drives the line no longer has stay until
+        :meth:`forget`: their last replies may still be on their way.
+        """
+        for drive in line.drives:
+            key = f"{line.name}/{drive.name}"
+            control = "bus" if drive.control else "monitor"
+            old = self._states.get(key)
+            if old is None or (old.address, old.control) != (drive.address, control):
                 state = DriveState(
                     name=drive.name,
                     bus=line.name,
                     address=drive.address,
                     protocol=line.protocol,
-                    control="bus" if drive.control else "monitor",
+                    control=control,
                 )
-                self._states[state.key] = state
-                self._published[state.key] = (state, float("-inf"))
-                self._charted[state.key] = {_FREQUENCY.key: _FREQUENCY}
-                self._sources[state.key] = {}
-                self._monitored[state.key] = _monitored(line, drive)
-                self._nominal_hz[state.key] = drive.nominal_frequency_hz
+                self._states[key] = state
+                self._fresh.pop(key, None)
+                self._published[key] = (state, float("-inf"))
+                self._charted[key] = {_FREQUENCY.key: _FREQUENCY}
+                self._sources[key] = {}
+            self._monitored[key] = _monitored(line, drive)
+            self._nominal_hz[key] = drive.nominal_frequency_hz
+
+    def forget(self, bus: str, names: set[str]) -> None:
+        """Drives ``names`` of line ``bus`` left the configuration: no snapshot, no events."""
+        for name in names:
+            key = f"{bus}/{name}"
+            for table in (
+                self._states, self._fresh, self._published, self._charted, self._sources,
+                self._monitored, self._nominal_hz,
+            ):  # fmt: skip
+                table.pop(key, None)
 
     def _emit(self, event: Event) -> None:
         """Publish ``event``; a drive's discrete events are also kept in its history."""
@@ -292,7 +317,9 @@ class FleetState:
         """Fold one reply into the drive's snapshot."""
         key = f"{bus}/{drive.name}"
         read_at = self._wall() - (self._clock.now() - at)
-        old = self._states[key]  # its times may lag (see _current): only its content is used
+        old = self._states.get(key)
+        if old is None:  # removed by a reload while its reply was on its way
+            return  # its times may lag (see _current): only its content is used
         changes: dict[str, Any] = {
             "online": True,
             "reference_pct": None if commanded is None else commanded.reference_pct,
@@ -457,6 +484,8 @@ class FleetState:
     def drive_availability(self, bus: str, drive: DrivePlan, online: bool, at: float) -> None:
         """Mark a drive online or offline; its last values stay, with their time."""
         key = f"{bus}/{drive.name}"
+        if key not in self._states:  # removed by a reload
+            return
         old = self._current(key)
         if old.online == online:
             return
@@ -474,6 +503,8 @@ class FleetState:
         is called once per audit, never per reply.
         """
         key = f"{bus}/{name}"
+        if key not in self._states:  # removed by a reload
+            return
         old = self._current(key)
         if old.watchdog != report:
             new = self._states[key] = dataclasses.replace(old, watchdog=report)

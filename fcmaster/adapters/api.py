@@ -26,7 +26,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException
 
 from fcmaster import __version__
-from fcmaster.adapters import metrics
+from fcmaster.adapters import config_metrics, metrics
 from fcmaster.adapters.api_requests import (
     Operator,
     StrictJsonRoute,
@@ -71,6 +71,7 @@ from fcmaster.adapters.schemas import (
 from fcmaster.adapters.stream import StreamRegistry, serve_stream
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.errors import UsageError
+from fcmaster.journal import KINDS, MAX_LIMIT, parse_since
 from fcmaster.protocol.parameter_set import ParameterSet
 from fcmaster.state import AvailabilityChanged, CommandCompleted, ConditionChanged, rfc3339
 
@@ -241,6 +242,34 @@ def create_app(
     async def buses(_: Viewer) -> Response:
         """Every line with its statistics (histogram buckets end at ``le: "+Inf"``)."""
         return json_response([line.to_json() for line in gateway.lines()])
+
+    @app.get("/api/v1/status", responses=_AUTH_ERRORS)
+    async def status(_: Viewer) -> Response:
+        """The daemon: its version and its config (hash, loaded_at, last_reload)."""
+        return json_response({"version": __version__, "config": gateway.config_status()})
+
+    @app.get("/api/v1/events", responses=_AUTH_ERRORS)
+    async def events(
+        _: Viewer,
+        since: str | None = None,
+        drive: str | None = None,
+        kind: str | None = None,
+        limit: Annotated[int, Query(ge=1, le=MAX_LIMIT)] = 100,
+    ) -> Response:
+        """The journal: the newest ``limit`` records matching, oldest first.
+
+        ``since``: a time (RFC 3339) or an age (``30m``, ``2h``, ``7d``); ``kind``: one of
+        command, alarm, warning, online, offline, watchdog, line_up, line_down, reload,
+        start, stop.
+        """
+        try:
+            after = None if since is None else parse_since(since, gateway.clock.wall())
+        except ValueError as exc:
+            raise HTTPException(422, f"since: {exc}") from None
+        if kind is not None and kind not in KINDS:
+            raise HTTPException(422, f"kind: {kind!r} is not one of {', '.join(KINDS)}")
+        records = await gateway.events(since=after, kind=kind, drive=drive, limit=limit)
+        return json_response(records)
 
     @app.get("/api/v1/drives/{name}/history", responses={**_AUTH_ERRORS, 404: _DRIVE_ERRORS[404]})
     async def drive_history(name: str, _: Viewer) -> Response:
@@ -439,6 +468,7 @@ def create_app(
             text = await metrics.render_async(
                 gateway.fleet.snapshot(), gateway.lines(), gateway.hub
             )
+            text += config_metrics.render(gateway.config_status())
             return Response(text, media_type=metrics.CONTENT_TYPE)
 
     @app.websocket("/api/v1/stream")

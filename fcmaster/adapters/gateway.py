@@ -66,3 +66,16 @@ class Gateway(Protocol):
 
     async def execute(self, drive: str, command: Command) -> CommandResult:
         """Carry out ``command`` on drive ``drive``; one result, always."""
+
+    def config_status(self) -> dict[str, Any]:
+        """The running config: ``hash``, ``loaded_at``, ``last_reload``, ``reloads``."""
+
+    async def events(
+        self,
+        *,
+        since: float | None = None,
+        kind: str | None = None,
+        drive: str | None = None,
+        limit: int = 100,
+    ) -> list[dict[str, Any]]:
+        """The journal's newest ``limit`` records matching the filters, oldest first."""

@@ -105,6 +105,8 @@ class BusMaster:
         self._up = False
         self.stats.down_reason = "not started"
         self._closing = False
+        self._serving = False  # inside _serve: the line's state changes only between exchanges
+        self._replans: list[tuple[LinePlan, asyncio.Future[None]]] = []
         self._log = log.bind(bus=plan.name, port=plan.port)
         self._report = LineReporter(
             plan.name,
@@ -187,6 +189,40 @@ class BusMaster:
             self._report.resolve(self.planner.submit(name, command, future))
             self._wake.set()
         return await future
+
+    async def reconfigure(self, plan: LinePlan) -> None:
+        """Serve the drives of ``plan`` from now on, without closing the port.
+
+        ``plan``'s line settings must be this line's (port, character format, timing): only
+        its drives differ. Applied between two exchanges, never while one is on the wire,
+        and the poll round goes on where it was (see :meth:`Planner.reconfigure`); returns
+        once applied.
+        """
+        done: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._replans.append((plan, done))
+        if self._serving:
+            self.planner.held = True  # a step chosen before this is chosen again after it
+            self._wake.set()
+        else:
+            self._replan()
+        await done
+
+    def _replan(self) -> None:
+        """Apply the plans :meth:`reconfigure` was given; nothing is on the wire."""
+        replans, self._replans = self._replans, []
+        for plan, done in replans:
+            self._report.flush()  # what the drives said before, while they are all known
+            names = {drive.name for drive in plan.drives}
+            self._report.resolve(
+                self.planner.reconfigure(plan, "the drive was removed from the configuration")
+            )
+            for name in set(self.stats.drives) - names:
+                del self.stats.drives[name]
+            for name in names:
+                self.stats.drives.setdefault(name, DriveStats())
+            self.plan = plan
+            if not done.done():
+                done.set_result(None)
 
     def cancel_queued(self, reason: str) -> None:
         """Shutdown: end every queued command but stops and the one on the wire, cancelled."""
@@ -294,8 +330,19 @@ class BusMaster:
         self._report.notify(self._observer.line_availability, self.plan.name, False, reason, now)
 
     async def _serve(self) -> None:
+        self._serving = True
+        try:
+            await self._serve_steps()
+        finally:
+            self._serving = False
+            if self._replans:  # the line is lost or closing: nothing is on the wire now
+                self._replan()
+
+    async def _serve_steps(self) -> None:
         clock, link, planner, steady = self._clock, self._link, self.planner, self._steady
         while True:
+            if self._replans:
+                self._replan()
             now = clock.now()
             step = planner.peek(now)
             if step is None:

@@ -87,7 +87,7 @@ from fcmaster.bus.intents import (
     unknown,
     without_reset,
 )
-from fcmaster.bus.plan import LinePlan, OnStart
+from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.bus.queue import CommandQueue
 from fcmaster.bus.rotation import Choice, Rotation
 from fcmaster.bus.steps import (
@@ -125,35 +125,64 @@ class Planner:
     def __init__(self, plan: LinePlan, codec: DriveCodec) -> None:
         self.plan = plan
         self.codec = codec
-        self.slots: list[DriveSlot] = []
-        self._by_name: dict[str, DriveSlot] = {}
-        for drive in plan.drives:
-            monitor = (
-                codec.default_monitor()
-                if drive.monitor is None
-                else tuple(codec.parameter(p) for p in drive.monitor)
-            )
-            slot = DriveSlot(plan=drive, sequence=codec.poll_sequence(monitor))
-            if drive.control and drive.on_start is OnStart.STOP:
-                slot.intent = ControlIntent(Motion.STOP)
-            self.slots.append(slot)
-            self._by_name[drive.name] = slot
         self._queue = CommandQueue()
-        for slot in self.slots:
-            # Where a poll cannot carry the stop that on_start asks for (an ENC frame holds
-            # one command), the stop goes out on its own, ahead of everything.
-            if (
-                slot.intent is not None
-                and not codec.poll(slot.address, slot.intent, None).carries_control
-            ):
-                stop = Command(action=Action.STOP, actor="on_start")
-                self._queue.add(Pending(stop, slot, []), None)
+        self.slots: list[DriveSlot] = [self._new_slot(drive) for drive in plan.drives]
+        self._by_name: dict[str, DriveSlot] = {slot.name: slot for slot in self.slots}
         self.rotation = Rotation(plan, self.slots)
         self._in_flight: Pending | None = None  # the command whose step is on the wire
         self._confirming = Confirmations()  # acknowledged, waiting for the status to show it
         self._ramp_keys = ramp_keys(codec)  # read from each bus-controlled drive once online
         self._adoption = Adoption(codec)
         self._peeked: Step | None = None  # the step peek chose, until it is committed
+        self.held = False  # nothing more is sent until the master has reconfigured the line
+
+    def _new_slot(self, drive: DrivePlan) -> DriveSlot:
+        codec = self.codec
+        slot = DriveSlot(plan=drive, sequence=codec.poll_sequence(self._monitor(drive)))
+        if drive.control and drive.on_start is OnStart.STOP:
+            slot.intent = ControlIntent(Motion.STOP)
+            # Where a poll cannot carry the stop that on_start asks for (an ENC frame holds
+            # one command), the stop goes out on its own, ahead of everything.
+            if not codec.poll(slot.address, slot.intent, None).carries_control:
+                stop = Command(action=Action.STOP, actor="on_start")
+                self._queue.add(Pending(stop, slot, []), None)
+        return slot
+
+    def _monitor(self, drive: DrivePlan) -> tuple[ParameterKey, ...]:
+        if drive.monitor is None:
+            return self.codec.default_monitor()
+        return tuple(self.codec.parameter(p) for p in drive.monitor)
+
+    def reconfigure(self, plan: LinePlan, reason: str) -> list[Completion]:
+        """Serve the drives of ``plan`` from now on; its line settings are this line's.
+
+        Called between exchanges. A drive kept with its address, ``control`` and
+        ``on_start`` keeps its bus-side state (online, commanded intent, commands waiting),
+        so it is never jolted, and takes its new plan and monitor list; any other is a new
+        drive, taken over as at start. The commands of a drive that left end cancelled with
+        ``reason``. The poll round goes on from where it was.
+        """
+        slots = []
+        for drive in plan.drives:
+            slot = self._by_name.get(drive.name)
+            if slot is None or not _same_drive(slot.plan, drive):
+                slot = self._new_slot(drive)
+            elif slot.plan != drive:
+                slot.plan = drive
+                slot.sequence = self.codec.poll_sequence(self._monitor(drive))
+                slot.cursor = 0
+            slots.append(slot)
+        gone = [slot for slot in self.slots if slot not in slots]
+        ended = self._queue.cancel_for(gone, reason) + self._confirming.end_for(gone, reason)
+        if self._in_flight is not None and self._in_flight.slot in gone:
+            self._in_flight = None
+        self.plan = plan
+        self.slots = slots
+        self._by_name = {slot.name: slot for slot in slots}
+        self.rotation.reconfigure(plan, slots)
+        self._peeked = None
+        self.held = False
+        return ended
 
     # -- commands in -------------------------------------------------------------------
 
@@ -265,7 +294,7 @@ class Planner:
         command of ``step``) or the command of ``step`` ended (cancelled at shutdown): then
         peek again. A step that is not still next must never be committed.
         """
-        return step is self._peeked
+        return step is self._peeked and not self.held
 
     def commit(self, step: Step, now: float) -> None:
         """``step``, the one :meth:`peek` just chose, goes on the wire now."""
@@ -513,3 +542,8 @@ class Planner:
         # have been served first.
         self._queue.remove(pending)
         report.completions.append(completion_of(pending, result))
+
+
+def _same_drive(old: DrivePlan, new: DrivePlan) -> bool:
+    """Whether ``new`` is ``old`` with other settings: the same station, taken over alike."""
+    return (old.address, old.control, old.on_start) == (new.address, new.control, new.on_start)

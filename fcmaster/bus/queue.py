@@ -78,6 +78,17 @@ class CommandQueue:
         self._normal.clear()
         return ended
 
+    def cancel_for(self, slots: list[DriveSlot], reason: str) -> list[Completion]:
+        """End the queued commands of ``slots`` (drives that left the line) as cancelled."""
+        result = result_of(Outcome.CANCELLED, reason)
+        ended: list[Completion] = []
+        for queue in (self._urgent, self._normal):
+            for pending in [p for p in queue if p.slot is not None and p.slot in slots]:
+                queue.remove(pending)
+                pending.phase = Phase.ENDED
+                ended.append(completion_of(pending, result))
+        return ended
+
     def cancel_unsent(self, reason: str, in_flight: Pending | None) -> list[Completion]:
         """End every queued non-urgent command but the one on the wire as cancelled."""
         result = result_of(Outcome.CANCELLED, reason)

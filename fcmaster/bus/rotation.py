@@ -60,6 +60,22 @@ class Rotation:
         self._answered_before_down: set[int] = set()  # answering when the port was lost
         self.silent = False  # the whole line fell silent
 
+    def reconfigure(self, plan: LinePlan, slots: list[DriveSlot]) -> None:
+        """The line's drives are now ``slots``: the round goes on at the drive due next."""
+        count = len(self.slots)
+        upcoming = self.slots[self._next_poll % count] if count else None
+        kept = {id(slot) for slot in slots}
+        self.plan = plan
+        self.slots = slots
+        self._index = {id(slot): i for i, slot in enumerate(slots)}
+        self._next_poll = 0
+        if upcoming is not None and id(upcoming) in kept:
+            self._next_poll = self._index[id(upcoming)]
+        self._demoted = [slot for slot in self._demoted if id(slot) in kept]
+        self._quick = sum(slot.quick_probe for slot in self._demoted)
+        self._streak &= kept
+        self._answered_before_down &= kept
+
     # -- choosing ------------------------------------------------------------------------
 
     def peek(self, now: float) -> Choice | None:

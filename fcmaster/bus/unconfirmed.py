@@ -73,6 +73,12 @@ class Confirmations:
         for pending in list(slot.confirming):
             report.completions.append(self._end(pending, result_of(Outcome.UNCONFIRMED, why)))
 
+    def end_for(self, slots: list[DriveSlot], reason: str) -> list[Completion]:
+        """Drives that left the line: what waits for them ends unconfirmed."""
+        why = f"{reason} before the drive's status showed the result"
+        waiting = [p for p in self._waiting if p.slot is not None and p.slot in slots]
+        return [self._end(p, result_of(Outcome.UNCONFIRMED, why)) for p in waiting]
+
     def end_all(self, reason: str) -> list[Completion]:
         """The line is lost or shut: everything waiting ends unconfirmed."""
         why = f"{reason} before the drive's status showed the result"

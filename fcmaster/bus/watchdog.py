@@ -155,6 +155,14 @@ class WatchdogAudit:
         # first); while any waits, the observer shows the audit the replies
         self._stop_waits: dict[str, tuple[asyncio.Future[None], bool]] = {}
 
+    def replan(self, plan: LinePlan) -> None:
+        """The line's drives are now ``plan``'s (a reload): audits of drives it left end."""
+        self.plan = plan
+        self.round_s = poll_round_s(plan)[0] if plan.drives else 0.0
+        names = {drive.name for drive in plan.drives}
+        for name in set(self._tasks) - names:
+            self._tasks.pop(name).cancel()
+
     def attach(self, execute: Execute) -> None:
         """Send the audit's reads and writes through ``execute`` (the line's BusMaster)."""
         self._execute = execute

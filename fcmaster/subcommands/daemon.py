@@ -22,6 +22,10 @@ from fcmaster.transport.usb import Machine
 
 log = structlog.get_logger("fcmaster.cli")
 
+# `fcmaster run`: a shutdown stop did not reach its drive (the motor may still turn), so
+# that systemd and docker can flag it
+EXIT_STOP_FAILED = 3
+
 
 def longest_probe_wait_s(plan: LinePlan) -> float:
     """The longest an absent drive waits for its probe, with every other drive but one absent.
@@ -133,7 +137,10 @@ def check_listen(listen: str, *, overridden: bool) -> None:
 
 
 async def run(path: Path, *, demo: bool, http_listen: str | None = None) -> int:
-    """Run the daemon until SIGTERM/SIGINT (``http_listen`` overrides ``http.listen``)."""
+    """Run the daemon until SIGTERM/SIGINT (``http_listen`` overrides ``http.listen``).
+
+    Exit status 0, or :data:`EXIT_STOP_FAILED` when a shutdown stop did not reach its drive.
+    """
     from fcmaster.service import Service
 
     config = config_module.load(path)
@@ -143,5 +150,15 @@ async def run(path: Path, *, demo: bool, http_listen: str | None = None) -> int:
         check_listen(config.model.http.listen, overridden=http_listen is not None)
     logsetup.configure(config.model.logging.level, config.model.logging.format)
     log.info("config.loaded", path=str(path), demo=demo, http_listen=http_listen)
-    await Service(config, demo=demo).run()
+
+    def load_again(_: config_module.Config) -> config_module.Config:
+        # SIGHUP: the same file, with the same command-line override
+        again = config_module.load(path)
+        return again if http_listen is None else with_http_listen(again, http_listen)
+
+    service = Service(config, demo=demo, load=load_again)
+    await service.run()
+    if service.stops_failed:
+        log.error("service.exit_stop_failed", drives=service.stops_failed, exit_status=3)
+        return EXIT_STOP_FAILED
     return 0

@@ -95,6 +95,19 @@ class FakeGateway:
                 return line, self.frames.setdefault(name, FrameLog(self.clock.wall)).since(since)
         return None
 
+    def config_status(self) -> dict[str, Any]:
+        return {"hash": "0" * 16, "loaded_at": None, "last_reload": None, "reloads": {}}
+
+    async def events(
+        self,
+        *,
+        since: float | None = None,
+        kind: str | None = None,
+        drive: str | None = None,
+        limit: int = 100,
+    ) -> list[dict[str, Any]]:
+        return []
+
     async def execute(self, drive: str, command: Command) -> CommandResult:
         self.executed.append((drive, command))
         result = self.respond(drive, command)

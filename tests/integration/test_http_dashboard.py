@@ -376,3 +376,51 @@ async def test_the_running_demo_shows_names_and_units_not_parameter_numbers(
         service.stop()
         async with asyncio.timeout(10):
             await task
+
+
+JOURNALED = """
+buses:
+  - name: line1
+    port: sim://line1
+    baudrate: 38400
+    drives:
+      - {{name: pump-1, address: 1}}
+    simulation:
+      drives:
+        1: {warning}
+http:
+  listen: 127.0.0.1:{port}
+  anonymous: viewer
+journal: {{path: {journal}}}
+"""
+
+
+async def test_a_page_opened_after_a_restart_shows_what_happened_before(
+    browser: Browser, tmp_path: Path
+) -> None:
+    port = free_port()
+    path = tmp_path / "plant.yaml"
+    journal = tmp_path / "journal.db"
+    # First run: a warning comes and is kept; second run: the drive has none.
+    for warning in ("{warning: {number: 59, every_s: 600, for_s: 300}}", "{}"):
+        path.write_text(JOURNALED.format(port=port, journal=journal, warning=warning))
+        service = Service(load_config(path))
+        task = asyncio.create_task(service.run(install_signals=False), name="test.journaled")
+        try:
+            if warning != "{}":
+                async with asyncio.timeout(30):
+                    while not await service.events(kind="warning"):  # noqa: ASYNC110
+                        await asyncio.sleep(0.05)  # (written by a thread: no event to wait on)
+                continue
+            await wait_until_listening(f"http://127.0.0.1:{port}", timeout_s=30)
+            page, problems = await _open(browser, f"http://127.0.0.1:{port}/")
+            events = page.get_by_test_id("events")
+            await expect(events).to_contain_text("pump-1: warning 59")
+            await expect(events).to_contain_text("raised")
+            await page.locator('tr[data-drive="pump-1"]').get_by_test_id("open").click()
+            await expect(page.get_by_test_id("dv-events")).to_contain_text("warning 59")
+            assert problems == []
+        finally:
+            service.stop()
+            async with asyncio.timeout(10):
+                await task

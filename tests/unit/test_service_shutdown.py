@@ -49,6 +49,18 @@ async def shut_down(
     clock: VirtualClock | None = None,
 ) -> list[MutableMapping[str, Any]]:
     """Run the service until both drives are online, stop it; the events it logged then."""
+    return (await shut_down_service(*drives, before_stop=before_stop, config=config, clock=clock))[
+        1
+    ]
+
+
+async def shut_down_service(
+    *drives: FcDrive,
+    before_stop: Any = None,
+    config: str = CONFIG,
+    clock: VirtualClock | None = None,
+) -> tuple[Service, list[MutableMapping[str, Any]]]:
+    """:func:`shut_down`, with the service that ran."""
     clock = clock or VirtualClock(T0)
     transports: list[ScriptedTransport] = []
 
@@ -65,7 +77,7 @@ async def shut_down(
     with structlog.testing.capture_logs() as logs:
         service.stop()
         await clock.complete(task, within=60.0)
-    return logs
+    return service, logs
 
 
 def service_events(logs: list[MutableMapping[str, Any]]) -> list[tuple[str, str, str | None]]:
@@ -123,6 +135,20 @@ async def test_stops_cancelled_because_the_port_is_gone_are_errors_naming_each_d
         ("service.shutdown_stop_failed", "error", "b"),
     ]
     assert all(d.running for d in drives)  # what the errors warn of
+
+
+async def test_the_drives_whose_stop_failed_are_named_for_the_exit_status() -> None:
+    a, b = FcDrive(1, running=True, output_pct=50.0), FcDrive(2, running=True, output_pct=50.0)
+
+    def power_off_b(_: ScriptedTransport) -> None:
+        b.silent = True
+
+    service, _ = await shut_down_service(a, b, before_stop=power_off_b)
+    assert service.stops_failed == ["line1/b"]
+    service, _ = await shut_down_service(
+        FcDrive(1, running=True, output_pct=50.0), FcDrive(2, running=True, output_pct=50.0)
+    )
+    assert service.stops_failed == []
 
 
 async def test_a_drive_still_turning_at_the_bound_is_a_warning_naming_it() -> None:

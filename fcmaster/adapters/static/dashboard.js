@@ -159,6 +159,7 @@ function handle(message) {
       for (const bus of message.buses) fleet.buses.set(bus.name, bus);
       fleet.limits = message.limits || {};
       linesDirty = true;
+      loadJournal();
       break;
     }
     case "drive":
@@ -574,6 +575,28 @@ function renderLines() {
 
 // -- events -------------------------------------------------------------------------------
 
+// A journal record as [stamp, text, class]: drive events as the stream tells them.
+function journalEntry(r) {
+  const message = {
+    alarm: { type: "condition" }, warning: { type: "condition" },
+    online: { type: "availability", online: true }, offline: { type: "availability", online: false },
+    command: { type: "command", command: { action: r.action, actor: r.actor }, result: { outcome: r.outcome, reason: r.reason } },
+  }[r.kind];
+  const where = [r.bus, r.drive].filter(Boolean).join("/");
+  const text = message ? eventText({ ...r, ...message })
+    : [`${where ? `${where}: ` : ""}${r.kind.replace("_", " ")}${r.outcome ? ` ${r.outcome}` : ""}` +
+       `${r.verdict ? ` ${r.verdict}` : ""}${r.reason ? ` (${r.reason})` : ""}`, ""];
+  return [clock(seconds(r.at)), ...text];
+}
+
+// The event list from the journal: what happened before this page (or the daemon) started.
+async function loadJournal() {
+  const response = await api(`/api/v1/events?limit=${EVENTS_KEPT}`);
+  if (!response.ok) return;
+  const entries = (await response.json()).map(journalEntry).reverse();
+  $("events").replaceChildren(...entries.map(([stamp, text, cls]) => el("li", { class: cls, text: `${stamp} ${text}` })));
+}
+
 function logEvent(text, cls = "", drive = null) {
   const stamp = new Date().toLocaleTimeString();
   const list = $("events");
@@ -614,9 +637,9 @@ async function openDrive(name) {
   if (detail !== current) return;  // another view was opened meanwhile
   if (!response.ok) { $("dv-charts").textContent = `No history: HTTP ${response.status}`; return; }
   const history = await response.json();
-  // the daemon's record of this drive's events, newest first, as the page keeps them
-  driveEvents.set(name, (history.events || []).map((message) =>
-    [clock(seconds(message.at)), ...eventText(message)]).reverse());
+  // the journal's record of this drive's events (from before a restart too), newest first
+  const journal = await api(`/api/v1/events?drive=${encodeURIComponent(name)}&limit=${DRIVE_EVENTS_KEPT}`);
+  if (journal.ok) driveEvents.set(name, (await journal.json()).map(journalEntry).reverse());
   renderDriveEvents(name);
   current.t = history.t;
   current.series = history.series;
