@@ -39,7 +39,12 @@ from fcmaster.adapters.auth import (
     parse_listen,
 )
 from fcmaster.adapters.gateway import Gateway
-from fcmaster.adapters.http_guard import HEAD_TIMEOUT_S, ConnectionGuard, guarded_protocol
+from fcmaster.adapters.http_guard import (
+    HEAD_TIMEOUT_S,
+    ConnectionGuard,
+    guarded_protocol,
+    guarded_stream,
+)
 from fcmaster.adapters.settings import HttpSettings
 from fcmaster.adapters.stream import StreamRegistry
 from fcmaster.errors import ConfigError
@@ -97,6 +102,11 @@ class HttpAdapter:
         self._address: tuple[str, int] | None = None
 
     @property
+    def streams(self) -> StreamRegistry:
+        """The open WebSocket streams."""
+        return self._streams
+
+    @property
     def url(self) -> str:
         """The base URL it listens on, e.g. ``http://127.0.0.1:8080`` (once entered)."""
         if self._address is None:
@@ -141,7 +151,7 @@ class HttpAdapter:
             log_level="warning",
             access_log=False,  # and so ?token= never lands in a log
             lifespan="off",
-            ws="websockets-sansio",
+            ws=guarded_stream(self.guard),  # counted, and dropped when it stops reading
             ws_max_size=MAX_BODY_BYTES,
             proxy_headers=False,  # the peer address decides loopback, not X-Forwarded-For
             server_header=False,

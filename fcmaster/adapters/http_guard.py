@@ -26,6 +26,14 @@ with a :class:`ConnectionGuard` around it:
   stop, coast or quick_stop (:data:`RESERVE_KEY` in the request's ``state``; the API
   answers anything else 503). Beyond that, a new connection is closed at once.
 
+- **streams count too**: a WebSocket stream is a connection that is never idle. At most
+  :data:`MAX_STREAMS` are open (:data:`STREAMS_PER_CLIENT` from one address), inside
+  :data:`MAX_CONNECTIONS`, so streams can never take the room requests and the reserve need;
+  an upgrade beyond that is answered 503. A stream whose client stops reading is dropped:
+  its socket's send buffer is small (:data:`STREAM_SEND_BUFFER`), the protocol stops
+  writing once the transport's buffer is full, and a transport that stays full for
+  :data:`STREAM_STALL_S` is aborted, so a silent client costs neither memory nor time.
+
 Counting happens in the protocol callbacks, on the event loop: no locks, no per-request
 cost beyond a dict lookup.
 """
@@ -33,12 +41,15 @@ cost beyond a dict lookup.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import socket
 from collections import OrderedDict
 from typing import Any, Final
 
 import h11
 import structlog
 from uvicorn.protocols.http.h11_impl import H11Protocol
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from fcmaster.clock import Clock
 
@@ -52,6 +63,10 @@ SHUTDOWN_HEAD_S: Final = 0.5  # stopping: a request already on its way is still 
 RESERVE: Final = 16  # beyond MAX_CONNECTIONS, for stops only, when none is idle
 MAX_PENALTIES: Final = 4096  # addresses remembered for holding connections idle
 RESERVE_KEY: Final = "fcmaster.reserve"  # in a request's scope["state"]: stops only
+MAX_STREAMS: Final = 128  # WebSocket streams in all (each one of MAX_CONNECTIONS)
+STREAMS_PER_CLIENT: Final = 32  # streams from one address
+STREAM_STALL_S: Final = 10.0  # a stream whose client reads nothing this long is dropped
+STREAM_SEND_BUFFER: Final = 32 * 1024  # the kernel's send buffer of a stream's socket
 
 
 class ConnectionGuard:
@@ -66,6 +81,9 @@ class ConnectionGuard:
         reserve: int = RESERVE,
         head_timeout_s: float = HEAD_TIMEOUT_S,
         body_timeout_s: float = BODY_TIMEOUT_S,
+        max_streams: int = MAX_STREAMS,
+        streams_per_client: int = STREAMS_PER_CLIENT,
+        stream_stall_s: float = STREAM_STALL_S,
     ) -> None:
         self.clock = clock  # times the penalties below (the timeouts are the loop's timers)
         self.max_connections = max_connections
@@ -77,6 +95,11 @@ class ConnectionGuard:
         self.idle: OrderedDict[GuardedProtocol, None] = OrderedDict()  # oldest first
         self.per_host: dict[str, int] = {}
         self.evicted = self.refused = self.timed_out = 0
+        self.max_streams = max_streams
+        self.streams_per_client = streams_per_client
+        self.stream_stall_s = stream_stall_s
+        self.streams: dict[str, int] = {}  # client address → open streams
+        self.stream_count = self.streams_refused = self.streams_dropped = 0
         # Addresses that lost a connection for holding it idle, until when: while the
         # server is full they cannot take an idle connection's place again, so that a
         # flood that reconnects at once does not churn an operator's new connection out.
@@ -104,14 +127,14 @@ class ConnectionGuard:
             self.refused += 1
             return False
         reserved = False
-        if len(self.open) >= self.max_connections:
+        if self._count() >= self.max_connections:
             if self.idle:  # make room, unless this address just lost an idle one itself
                 if self._penalised(host) or not self._evict(None):
                     self.refused += 1
                     return False
                 # in the place of a reserve connection, it is one too
-                reserved = len(self.open) >= self.max_connections
-            elif len(self.open) < self.max_connections + self.reserve:
+                reserved = self._count() >= self.max_connections
+            elif self._count() < self.max_connections + self.reserve:
                 reserved = True  # every connection is busy: this one takes stops only
             else:
                 self.refused += 1
@@ -121,6 +144,28 @@ class ConnectionGuard:
         self.idle[conn] = None
         conn.reserved = reserved
         return True
+
+    def _count(self) -> int:
+        return len(self.open) + self.stream_count
+
+    def admit_stream(self, host: str) -> bool:
+        """A connection of ``host`` asks to become a stream; False: answer it 503."""
+        if (
+            self.stream_count >= self.max_streams
+            or self.streams.get(host, 0) >= self.streams_per_client
+        ):
+            self.streams_refused += 1
+            return False
+        self.stream_count += 1
+        self.streams[host] = self.streams.get(host, 0) + 1
+        return True
+
+    def stream_gone(self, host: str) -> None:
+        """A stream of ``host`` closed."""
+        self.stream_count -= 1
+        self.streams[host] -= 1
+        if not self.streams[host]:
+            del self.streams[host]
 
     def busy(self, conn: GuardedProtocol) -> None:
         """``conn`` carries a request now."""
@@ -232,9 +277,18 @@ class GuardedProtocol(H11Protocol):
             super().shutdown()
 
     def handle_websocket_upgrade(self, event: h11.Request) -> None:
-        """A WebSocket stream is counted by the stream registry, not here."""
+        """The connection becomes a stream, counted as one (or is answered 503)."""
         self._cancel_deadline()
         self.guard.gone(self)
+        if not self.guard.admit_stream(self.client[0] if self.client else "?"):
+            body = b"too many streams are open; try again later"
+            headers = [(b"content-type", b"text/plain; charset=utf-8"), (b"connection", b"close")]
+            headers.append((b"content-length", str(len(body)).encode()))
+            for part in (h11.Response(status_code=503, headers=headers), h11.Data(data=body)):
+                self.transport.write(self.conn.send(part) or b"")
+            self.transport.write(self.conn.send(h11.EndOfMessage()) or b"")
+            self.transport.close()
+            return
         super().handle_websocket_upgrade(event)
 
     def close_now(self) -> None:
@@ -267,6 +321,64 @@ class GuardedProtocol(H11Protocol):
             self._deadline = None
 
 
+class GuardedStream(WebSocketsSansIOProtocol):
+    """uvicorn's WebSocket protocol, counted by a :class:`ConnectionGuard`.
+
+    A stream whose client reads nothing for the guard's ``stream_stall_s`` is dropped.
+    """
+
+    guard: ConnectionGuard  # set on the subclass :func:`guarded_protocol` makes
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._stall: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        """Keep the kernel's share of a silent client's backlog small."""
+        super().connection_made(transport)
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, STREAM_SEND_BUFFER)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        """Forget the stream."""
+        self._calm()
+        self.guard.stream_gone(self.client[0] if self.client else "?")
+        super().connection_lost(exc)
+
+    def pause_writing(self) -> None:
+        """The client is not taking what it was sent: it has a while to start again."""
+        super().pause_writing()
+        if self._stall is None:
+            self._stall = self.loop.call_later(self.guard.stream_stall_s, self._stalled)
+
+    def resume_writing(self) -> None:
+        """The client reads again."""
+        super().resume_writing()
+        self._calm()
+
+    def _calm(self) -> None:
+        if self._stall is not None:
+            self._stall.cancel()
+            self._stall = None
+
+    def _stalled(self) -> None:
+        self._stall = None
+        self.guard.streams_dropped += 1
+        log.warning(
+            "http.stream_dropped",
+            client=self.client[0] if self.client else "?",
+            reason=f"read nothing for {self.guard.stream_stall_s:g} s",
+        )
+        self.transport.abort()  # a close frame would wait behind what it never read
+
+
 def guarded_protocol(guard: ConnectionGuard) -> type[GuardedProtocol]:
     """The protocol class for one server, bound to its guard (uvicorn's ``http=``)."""
     return type("GuardedH11Protocol", (GuardedProtocol,), {"guard": guard})
+
+
+def guarded_stream(guard: ConnectionGuard) -> type[GuardedStream]:
+    """The WebSocket protocol class for one server, bound to its guard (uvicorn's ``ws=``)."""
+    return type("GuardedStream", (GuardedStream,), {"guard": guard})
