@@ -16,6 +16,13 @@ all: then the API is read-only) *and* the request comes from the loopback interf
 names a loopback host (``Host: 127.0.0.1:8080``, ``localhost``, ``[::1]``). The last check
 keeps a web page in the operator's browser from reading the fleet through a DNS name that
 it re-binds to 127.0.0.1.
+
+Guessing is slowed and told in aggregate (:class:`FailedAuthentications`, on the HTTP
+listener): an address may present :data:`FAILURES_PER_WINDOW` wrong or malformed tokens
+in :data:`FAILURE_WINDOW_S`; beyond that its requests are answered 429 without a token
+being looked at, until the window ends. The log gets one line when an address first fails
+in a window, one when it is throttled, and one with the count of what it sent while
+throttled — never a line per wrong token.
 """
 
 from __future__ import annotations
@@ -24,12 +31,21 @@ import enum
 import hashlib
 import hmac
 import ipaddress
-from collections.abc import Iterable
+from collections import OrderedDict
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Final
+
+import structlog
 
 from fcmaster.errors import ConfigError, FcmasterError
 
 DEFAULT_PORT = 8080
+FAILURES_PER_WINDOW: Final = 10  # wrong tokens an address may send in a window
+FAILURE_WINDOW_S: Final = 60.0
+MAX_ADDRESSES: Final = 4096  # addresses remembered (the least recent are forgotten)
+
+log = structlog.get_logger("fcmaster.adapters.http")
 
 
 class Role(enum.IntEnum):
@@ -58,11 +74,85 @@ ANONYMOUS = "anonymous"
 class AuthError(FcmasterError):
     """The request cannot be let through; ``status`` is 401 or 403."""
 
-    def __init__(self, status: int, reason: str, *, actor: str = "-") -> None:
+    def __init__(
+        self, status: int, reason: str, *, actor: str = "-", retry_after_s: float = 0.0
+    ) -> None:
         self.status = status
         self.reason = reason
         self.actor = actor  # the token's name when it was recognised
+        self.retry_after_s = retry_after_s  # 429: when the address may try again
+        self.counted = False  # logged in aggregate by FailedAuthentications: not one by one
         super().__init__(reason)
+
+
+@dataclass(slots=True)
+class _Failures:
+    since: float  # the window's start
+    count: int = 0  # failures in the window
+    throttled: int = 0  # requests refused unlooked-at in the window
+
+
+class FailedAuthentications:
+    """Wrong tokens per client address: counted, throttled, logged in aggregate."""
+
+    def __init__(
+        self,
+        now: Callable[[], float],
+        *,
+        per_window: int = FAILURES_PER_WINDOW,
+        window_s: float = FAILURE_WINDOW_S,
+    ) -> None:
+        self.now = now
+        self.per_window = per_window
+        self.window_s = window_s
+        self._hosts: OrderedDict[str, _Failures] = OrderedDict()
+        self.failed = self.throttled = 0  # since start, for the status
+
+    def _window(self, host: str) -> _Failures | None:
+        entry = self._hosts.get(host)
+        now = self.now()
+        if entry is not None and now - entry.since >= self.window_s:
+            if entry.throttled:
+                log.warning(
+                    "http.auth_throttled_requests", client=host, count=entry.throttled,
+                    over_s=round(now - entry.since, 1),
+                )  # fmt: skip
+            del self._hosts[host]
+            entry = None
+        return entry
+
+    def check(self, host: str) -> None:
+        """AuthError 429 while ``host`` has used up its failures in this window."""
+        entry = self._window(host)
+        if entry is not None and entry.count >= self.per_window:
+            entry.throttled += 1
+            self.throttled += 1
+            left = entry.since + self.window_s - self.now()
+            error = AuthError(
+                429,
+                f"too many failed authentications from this address: try again in {left:.0f} s",
+                retry_after_s=left,
+            )
+            error.counted = True
+            raise error
+
+    def fail(self, host: str, error: AuthError) -> None:
+        """``host`` presented a token that let it nowhere."""
+        self.failed += 1
+        error.counted = True
+        entry = self._window(host)
+        if entry is None:
+            entry = self._hosts[host] = _Failures(since=self.now())
+            if len(self._hosts) > MAX_ADDRESSES:
+                self._hosts.popitem(last=False)
+            log.warning("http.auth_failed", client=host, reason=error.reason)
+        self._hosts.move_to_end(host)
+        entry.count += 1
+        if entry.count == self.per_window:
+            log.warning(
+                "http.auth_throttled", client=host, failures=entry.count,
+                window_s=self.window_s,
+            )  # fmt: skip
 
 
 @dataclass(slots=True, frozen=True)
@@ -137,9 +227,19 @@ def listen_problem(listen: str, *, has_tokens: bool) -> str:
 class Authenticator:
     """Checks bearer tokens and the anonymous rules (see the module docstring)."""
 
-    def __init__(self, tokens: Iterable[tuple[str, Role, str]], *, anonymous: bool) -> None:
-        """Tokens as ``(name, role, secret)``; ``anonymous``: let loopback reads through."""
+    def __init__(
+        self,
+        tokens: Iterable[tuple[str, Role, str]],
+        *,
+        anonymous: bool,
+        failures: FailedAuthentications | None = None,
+    ) -> None:
+        """Tokens as ``(name, role, secret)``; ``anonymous``: let loopback reads through.
+
+        ``failures`` counts and throttles wrong tokens per client address (HTTP).
+        """
         self._tokens = tuple(_Token(name, role, _digest(secret)) for name, role, secret in tokens)
+        self.failures = failures
         # With no token at all nobody could read: the API is then read-only for loopback.
         self.anonymous = anonymous or not self._tokens
 
@@ -151,12 +251,23 @@ class Authenticator:
     def authenticate(
         self, authorization: str | None, *, client_host: str | None, host_header: str | None
     ) -> Principal:
-        """The caller of one request; AuthError (401) when it cannot be let in at all."""
+        """The caller of one request; AuthError (401) when it cannot be let in at all.
+
+        429 while its address is throttled for wrong tokens.
+        """
         if authorization is not None:
-            scheme, _, secret = authorization.strip().partition(" ")
-            if scheme.lower() != "bearer" or not secret.strip():
-                raise AuthError(401, "send the token as 'Authorization: Bearer <token>'")
-            return self._match(secret.strip())
+            host = client_host or "?"
+            if self.failures is not None:
+                self.failures.check(host)
+            try:
+                scheme, _, secret = authorization.strip().partition(" ")
+                if scheme.lower() != "bearer" or not secret.strip():
+                    raise AuthError(401, "send the token as 'Authorization: Bearer <token>'")
+                return self._match(secret.strip())
+            except AuthError as error:
+                if self.failures is not None:
+                    self.failures.fail(host, error)
+                raise
         if self.anonymous and is_loopback_host(client_host) and is_loopback_host(host_header):
             return Principal(ANONYMOUS, Role.VIEWER, anonymous=True)
         if self.anonymous:

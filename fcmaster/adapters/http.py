@@ -34,6 +34,7 @@ from fcmaster.adapters.api import MAX_BODY_BYTES, create_app
 from fcmaster.adapters.auth import (
     DEFAULT_PORT,
     Authenticator,
+    FailedAuthentications,
     Role,
     listen_problem,
     parse_listen,
@@ -96,6 +97,7 @@ class HttpAdapter:
         self.operator_token: str | None = None  # the demo's, once entered
         self._streams = StreamRegistry()
         self.guard = ConnectionGuard(clock=gateway.clock)
+        self.failures = FailedAuthentications(gateway.clock.now)  # wrong tokens per address
         self._server: _Server | None = None
         self._task: asyncio.Task[None] | None = None
         self._socket: socket.socket | None = None
@@ -122,7 +124,11 @@ class HttpAdapter:
         if self.demo:
             self.operator_token = secrets.token_urlsafe(24)
             tokens.append((DEMO_TOKEN_NAME, Role.OPERATOR, self.operator_token))
-        return Authenticator(tokens, anonymous=self.settings.anonymous == "viewer" or not tokens)
+        return Authenticator(
+            tokens,
+            anonymous=self.settings.anonymous == "viewer" or not tokens,
+            failures=self.failures,
+        )
 
     def _bind(self, host: str, port: int) -> socket.socket:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET

@@ -34,6 +34,11 @@ with a :class:`ConnectionGuard` around it:
   writing once the transport's buffer is full, and a transport that stays full for
   :data:`STREAM_STALL_S` is aborted, so a silent client costs neither memory nor time.
 
+- **heads of a sane size**: a request line longer than :data:`MAX_REQUEST_LINE` is answered
+  414, a head longer than :data:`MAX_HEAD_BYTES` or with more than :data:`MAX_HEADERS`
+  header lines 431, and the connection is closed. h11 alone limits only a head that is
+  still incomplete, so one that arrives whole in a chunk of any size would be taken.
+
 Counting happens in the protocol callbacks, on the event loop: no locks, no per-request
 cost beyond a dict lookup.
 """
@@ -42,6 +47,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import socket
 from collections import OrderedDict
 from typing import Any, Final
@@ -51,6 +57,7 @@ import structlog
 from uvicorn.protocols.http.h11_impl import H11Protocol
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
+from fcmaster.adapters.tcp import no_delay
 from fcmaster.clock import Clock
 
 log = structlog.get_logger("fcmaster.adapters.http")
@@ -63,6 +70,9 @@ SHUTDOWN_HEAD_S: Final = 0.5  # stopping: a request already on its way is still 
 RESERVE: Final = 16  # beyond MAX_CONNECTIONS, for stops only, when none is idle
 MAX_PENALTIES: Final = 4096  # addresses remembered for holding connections idle
 RESERVE_KEY: Final = "fcmaster.reserve"  # in a request's scope["state"]: stops only
+MAX_REQUEST_LINE: Final = 8 * 1024  # bytes of "GET /path?query HTTP/1.1"
+MAX_HEAD_BYTES: Final = 32 * 1024  # the request line and every header
+MAX_HEADERS: Final = 100  # header lines
 MAX_STREAMS: Final = 128  # WebSocket streams in all (each one of MAX_CONNECTIONS)
 STREAMS_PER_CLIENT: Final = 32  # streams from one address
 STREAM_STALL_S: Final = 10.0  # a stream whose client reads nothing this long is dropped
@@ -94,7 +104,7 @@ class ConnectionGuard:
         self.open: dict[GuardedProtocol, str] = {}  # connection → client address
         self.idle: OrderedDict[GuardedProtocol, None] = OrderedDict()  # oldest first
         self.per_host: dict[str, int] = {}
-        self.evicted = self.refused = self.timed_out = 0
+        self.evicted = self.refused = self.timed_out = self.too_large = 0
         self.max_streams = max_streams
         self.streams_per_client = streams_per_client
         self.stream_stall_s = stream_stall_s
@@ -215,9 +225,13 @@ class GuardedProtocol(H11Protocol):
         self.answered = 0  # requests answered on this connection
         self.closing = False  # the server is stopping
         self._deadline: asyncio.TimerHandle | None = None
+        self._head: bytearray | None = bytearray()  # the head coming in (None: not looking)
+        self._line_end = -1  # where its request line ends (-1: not seen yet)
+        self._lines = 0  # line ends seen in it
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         """Admit the connection or close it at once; start waiting for a request head."""
+        no_delay(transport)
         super().connection_made(transport)
         host = self.client[0] if self.client else "?"
         if not self.guard.admit(self, host):
@@ -230,6 +244,55 @@ class GuardedProtocol(H11Protocol):
         self._cancel_deadline()
         self.guard.gone(self)
         super().connection_lost(exc)
+
+    def data_received(self, data: bytes) -> None:
+        """Refuse a head beyond the limits before h11 takes it in."""
+        # Only a new request's head: not the rest of a body the client still sends after
+        # its answer (a 413's), which h11 reads on and throws away.
+        looking = self._head is not None and self.conn.their_state is h11.IDLE
+        if looking and not self._head_fits(data):
+            return
+        super().data_received(data)
+
+    def _head_fits(self, data: bytes) -> bool:
+        # Each chunk is looked at once (a head sent a byte at a time costs no more than one
+        # sent whole): the scans start where the last one stopped.
+        head = self._head
+        assert head is not None
+        seen = len(head)
+        head += data
+        end = head.find(b"\r\n\r\n", max(0, seen - 3))
+        size = end if end >= 0 else len(head)
+        if self._line_end < 0:
+            self._line_end = head.find(b"\r\n", max(0, seen - 1), size)
+        self._lines += head.count(b"\r\n", max(0, seen - 1), size)
+        too_large = "Request Header Fields Too Large"
+        if (self._line_end if self._line_end >= 0 else size) > MAX_REQUEST_LINE:
+            return self._refuse(414, "URI Too Long", f"request line over {MAX_REQUEST_LINE} bytes")
+        if size > MAX_HEAD_BYTES:
+            return self._refuse(431, too_large, f"head over {MAX_HEAD_BYTES} bytes")
+        if self._lines > MAX_HEADERS:
+            return self._refuse(431, too_large, f"over {MAX_HEADERS} headers")
+        if end >= 0:  # whole and within the limits: the rest is h11's
+            self._head = None
+        return True
+
+    def _expect_next_head(self) -> None:
+        self._head = bytearray()
+        self._line_end = -1
+        self._lines = 0
+
+    def _refuse(self, status: int, phrase: str, reason: str) -> bool:
+        self.guard.too_large += 1
+        body = json.dumps({"reason": reason}).encode()
+        self.transport.write(
+            f"HTTP/1.1 {status} {phrase}\r\ncontent-type: application/json\r\n"
+            f"content-length: {len(body)}\r\nconnection: close\r\n\r\n".encode()
+            + body
+        )
+        self._head = None
+        self.close_now()
+        return False
 
     def handle_events(self) -> None:
         """Let uvicorn read events; a request head now received makes the connection busy."""
@@ -252,6 +315,7 @@ class GuardedProtocol(H11Protocol):
         self.answered += 1
         if not self.transport.is_closing() and (self.cycle is None or self.cycle.response_complete):
             self.guard.waiting(self)
+            self._expect_next_head()  # the next request's head is looked at too
             if self.closing:
                 self._shut()
             else:

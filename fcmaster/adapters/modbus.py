@@ -74,6 +74,7 @@ from fcmaster.adapters.modbus_map import (
     register_map,
 )
 from fcmaster.adapters.settings import ModbusSettings, modbus_listen
+from fcmaster.adapters.tcp import no_delay
 from fcmaster.bus.commands import CommandResult
 from fcmaster.bus.plan import LinePlan
 from fcmaster.errors import ConfigError, FcmasterError, UsageError
@@ -247,6 +248,7 @@ class ModbusAdapter:
 
         The task is ours rather than the server's, so the adapter can end it at shutdown.
         """
+        no_delay(writer.transport)  # an answer goes out at once, not after the client's ACK
         peer = writer.get_extra_info("peername") or ("?", 0)
         host, port = str(peer[0]), int(peer[1])
         actor = f"modbus:[{host}]:{port}" if ":" in host else f"modbus:{host}:{port}"
