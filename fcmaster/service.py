@@ -49,6 +49,7 @@ from fcmaster.bus.watchdog import WatchdogAudit
 from fcmaster.clock import Clock, MonotonicClock
 from fcmaster.config import Config
 from fcmaster.hub import Hub
+from fcmaster.process_limits import RepeatedErrors, fit_file_limit
 from fcmaster.state import FleetState
 
 log = structlog.get_logger("fcmaster.service")
@@ -206,9 +207,11 @@ class Service:
     async def run(self, *, install_signals: bool = True) -> None:
         """Run until :meth:`stop` or SIGTERM/SIGINT; then shut down in order."""
         loop = asyncio.get_running_loop()
-        if install_signals:
+        if install_signals:  # the process is ours: its signals, its files, its loop's errors
             for sig in (signal.SIGTERM, signal.SIGINT):
                 loop.add_signal_handler(sig, self.stop)
+            fit_file_limit()
+            RepeatedErrors(loop).install()
         try:
             async with AsyncExitStack() as stack:
                 for plan in self.config.lines:

@@ -49,6 +49,7 @@ from fcmaster.adapters.http_guard import (
 from fcmaster.adapters.settings import HttpSettings
 from fcmaster.adapters.stream import StreamRegistry
 from fcmaster.errors import ConfigError
+from fcmaster.process_limits import connection_budget
 
 log = structlog.get_logger("fcmaster.adapters.http")
 
@@ -143,6 +144,7 @@ class HttpAdapter:
         if self._task is not None:
             raise RuntimeError("the HTTP adapter is already running")
         host, port = parse_listen(self.settings.listen)
+        self.guard.fit(connection_budget())  # what the open-file limit leaves to connections
         auth = self._authenticator(host)
         app = create_app(
             self.gateway,

@@ -115,6 +115,23 @@ class ConnectionGuard:
         # flood that reconnects at once does not churn an operator's new connection out.
         self.penalties: OrderedDict[str, float] = OrderedDict()
 
+    def fit(self, budget: int) -> None:
+        """Hold at most ``budget`` connections in all, reserve included (the file limit's).
+
+        Past the open-file limit nothing can be accepted, not even a stop: the guard must
+        be full, and evicting, before the process runs out of descriptors.
+        """
+        if self.max_connections + self.reserve <= budget:
+            return
+        was = self.max_connections
+        self.max_connections = max(1, budget - self.reserve)
+        self.max_streams = min(self.max_streams, max(1, self.max_connections // 2))
+        self.per_client = min(self.per_client, self.max_connections)
+        log.warning(
+            "http.connections_fitted", max_connections=self.max_connections, was=was,
+            max_streams=self.max_streams, reason="the open-file limit is low",
+        )  # fmt: skip
+
     def penalise(self, host: str) -> None:
         """``host`` held a connection without using it (evicted, or timed out)."""
         self.penalties[host] = self.clock.now() + self.head_timeout_s
