@@ -40,12 +40,8 @@ from fcmaster.adapters.auth import (
     parse_listen,
 )
 from fcmaster.adapters.gateway import Gateway
-from fcmaster.adapters.http_guard import (
-    HEAD_TIMEOUT_S,
-    ConnectionGuard,
-    guarded_protocol,
-    guarded_stream,
-)
+from fcmaster.adapters.http_guard import HEAD_TIMEOUT_S, ConnectionGuard, guarded_protocol
+from fcmaster.adapters.http_streams import guarded_stream
 from fcmaster.adapters.settings import HttpSettings
 from fcmaster.adapters.stream import StreamRegistry
 from fcmaster.errors import ConfigError

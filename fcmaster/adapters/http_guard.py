@@ -30,7 +30,7 @@ with a :class:`ConnectionGuard` around it:
   :data:`MAX_STREAMS` are open (:data:`STREAMS_PER_CLIENT` from one address), inside
   :data:`MAX_CONNECTIONS`, so streams can never take the room requests and the reserve need;
   an upgrade beyond that is answered 503. A stream whose client stops reading is dropped:
-  its socket's send buffer is small (:data:`STREAM_SEND_BUFFER`), the protocol stops
+  its socket's send buffer is small (:mod:`.http_streams`), the protocol stops
   writing once the transport's buffer is full, and a transport that stays full for
   :data:`STREAM_STALL_S` is aborted, so a silent client costs neither memory nor time.
 
@@ -46,16 +46,13 @@ cost beyond a dict lookup.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
-import socket
 from collections import OrderedDict
 from typing import Any, Final
 
 import h11
 import structlog
 from uvicorn.protocols.http.h11_impl import H11Protocol
-from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from fcmaster.adapters.tcp import no_delay
 from fcmaster.clock import Clock
@@ -76,7 +73,6 @@ MAX_HEADERS: Final = 100  # header lines
 MAX_STREAMS: Final = 128  # WebSocket streams in all (each one of MAX_CONNECTIONS)
 STREAMS_PER_CLIENT: Final = 32  # streams from one address
 STREAM_STALL_S: Final = 10.0  # a stream whose client reads nothing this long is dropped
-STREAM_SEND_BUFFER: Final = 32 * 1024  # the kernel's send buffer of a stream's socket
 
 
 class ConnectionGuard:
@@ -402,64 +398,6 @@ class GuardedProtocol(H11Protocol):
             self._deadline = None
 
 
-class GuardedStream(WebSocketsSansIOProtocol):
-    """uvicorn's WebSocket protocol, counted by a :class:`ConnectionGuard`.
-
-    A stream whose client reads nothing for the guard's ``stream_stall_s`` is dropped.
-    """
-
-    guard: ConnectionGuard  # set on the subclass :func:`guarded_protocol` makes
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self._stall: asyncio.TimerHandle | None = None
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        """Keep the kernel's share of a silent client's backlog small."""
-        super().connection_made(transport)
-        sock = transport.get_extra_info("socket")
-        if sock is not None:
-            with contextlib.suppress(OSError):
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, STREAM_SEND_BUFFER)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        """Forget the stream."""
-        self._calm()
-        self.guard.stream_gone(self.client[0] if self.client else "?")
-        super().connection_lost(exc)
-
-    def pause_writing(self) -> None:
-        """The client is not taking what it was sent: it has a while to start again."""
-        super().pause_writing()
-        if self._stall is None:
-            self._stall = self.loop.call_later(self.guard.stream_stall_s, self._stalled)
-
-    def resume_writing(self) -> None:
-        """The client reads again."""
-        super().resume_writing()
-        self._calm()
-
-    def _calm(self) -> None:
-        if self._stall is not None:
-            self._stall.cancel()
-            self._stall = None
-
-    def _stalled(self) -> None:
-        self._stall = None
-        self.guard.streams_dropped += 1
-        log.warning(
-            "http.stream_dropped",
-            client=self.client[0] if self.client else "?",
-            reason=f"read nothing for {self.guard.stream_stall_s:g} s",
-        )
-        self.transport.abort()  # a close frame would wait behind what it never read
-
-
 def guarded_protocol(guard: ConnectionGuard) -> type[GuardedProtocol]:
     """The protocol class for one server, bound to its guard (uvicorn's ``http=``)."""
     return type("GuardedH11Protocol", (GuardedProtocol,), {"guard": guard})
-
-
-def guarded_stream(guard: ConnectionGuard) -> type[GuardedStream]:
-    """The WebSocket protocol class for one server, bound to its guard (uvicorn's ``ws=``)."""
-    return type("GuardedStream", (GuardedStream,), {"guard": guard})
