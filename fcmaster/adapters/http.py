@@ -34,11 +34,11 @@ from fcmaster.adapters.api import MAX_BODY_BYTES, create_app
 from fcmaster.adapters.auth import (
     DEFAULT_PORT,
     Authenticator,
-    FailedAuthentications,
     Role,
     listen_problem,
     parse_listen,
 )
+from fcmaster.adapters.auth_failures import FailedAuthentications
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.http_guard import HEAD_TIMEOUT_S, ConnectionGuard, guarded_protocol
 from fcmaster.adapters.http_streams import guarded_stream

@@ -15,7 +15,7 @@ import httpx
 import pytest
 from structlog.testing import capture_logs
 
-from fcmaster.adapters.auth import FAILURES_PER_WINDOW
+from fcmaster.adapters.auth_failures import FAILURES_PER_WINDOW
 from fcmaster.adapters.http import HttpAdapter
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.http_harness import OPERATOR, OPERATOR_TOKEN, VIEWER, serving
