@@ -115,7 +115,7 @@ class ReadBudget:
 
     def __init__(self, per_s: float, burst: int) -> None:
         self.interval = 1.0 / per_s
-        self.burst_s = burst * self.interval
+        self.burst_s = (burst - 1) * self.interval  # so that exactly `burst` go at once
         self._due = 0.0  # when the budget is spent up to (the loop's time)
         self.waited = 0  # answers that had to wait for the budget
 
