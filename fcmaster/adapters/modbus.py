@@ -34,7 +34,7 @@ not keep it open), and a connection that sends nothing for :data:`IDLE_TIMEOUT_S
 No client locks the others out: when :data:`MAX_CONNECTIONS` are open, a new connection
 takes the place of the one that has waited longest for its next request (the oldest idle
 one), so silent connections cannot keep a PLC out. And no client flood slows the lines:
-every request's answer is paced by one budget for the whole server (:class:`ReadBudget`,
+every request's answer is paced by one budget for the whole server (:class:`AnswerBudget`,
 :data:`REQUESTS_PER_S`), so what the server costs the shared event loop is bounded per
 second however many clients poll how fast; beyond it answers wait, their clients with them.
 """
@@ -110,7 +110,7 @@ class _Refused(FcmasterError):
         self.code = code
 
 
-class ReadBudget:
+class AnswerBudget:
     """Answers per second for the whole server (a generic cell rate: fair, first come)."""
 
     def __init__(self, per_s: float, burst: int) -> None:
@@ -154,7 +154,7 @@ class ModbusAdapter:
         self.partial_frame_s = partial_frame_s
         self.idle_timeout_s = idle_timeout_s
         self.max_connections = max_connections
-        self.budget = ReadBudget(requests_per_s, REQUESTS_BURST)
+        self.budget = AnswerBudget(requests_per_s, REQUESTS_BURST)
         self.shutdown_grace_s = shutdown_grace_s
         self.gateway = gateway
         self.map = register_map(lines, settings.units)

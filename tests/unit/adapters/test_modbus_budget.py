@@ -6,11 +6,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fcmaster.adapters.modbus import ReadBudget
+from fcmaster.adapters.modbus import AnswerBudget
 
 
 def test_a_burst_is_answered_at_once_and_the_rest_in_turn() -> None:
-    budget = ReadBudget(per_s=100.0, burst=10)
+    budget = AnswerBudget(per_s=100.0, burst=10)
     delays = [budget.delay(now=5.0) for _ in range(15)]
     assert delays[:10] == [0.0] * 10
     assert delays[10:] == pytest.approx([0.01, 0.02, 0.03, 0.04, 0.05])
@@ -18,7 +18,7 @@ def test_a_burst_is_answered_at_once_and_the_rest_in_turn() -> None:
 
 
 def test_a_quiet_spell_refills_the_burst_and_no_more() -> None:
-    budget = ReadBudget(per_s=100.0, burst=10)
+    budget = AnswerBudget(per_s=100.0, burst=10)
     for _ in range(15):
         budget.delay(now=0.0)
     assert [budget.delay(now=60.0) for _ in range(11)][-2:] == pytest.approx([0.0, 0.01])
@@ -26,7 +26,7 @@ def test_a_quiet_spell_refills_the_burst_and_no_more() -> None:
 
 @given(st.lists(st.floats(min_value=0.0, max_value=0.5), min_size=1, max_size=300))
 def test_answers_never_go_faster_than_the_budget(gaps: list[float]) -> None:
-    budget = ReadBudget(per_s=200.0, burst=20)
+    budget = AnswerBudget(per_s=200.0, burst=20)
     now, answered = 0.0, []
     for gap in gaps:
         now += gap
