@@ -61,7 +61,7 @@ log = structlog.get_logger("fcmaster.adapters.http")
 
 HEAD_TIMEOUT_S: Final = 5.0  # a whole request head, from connecting or the last answer
 BODY_TIMEOUT_S: Final = 10.0  # a request's body, from its head
-MAX_CONNECTIONS: Final = 256  # HTTP connections in all (WebSocket streams count apart)
+MAX_CONNECTIONS: Final = 256  # HTTP connections in all, WebSocket streams among them
 PER_CLIENT: Final = 64  # connections from one address
 SHUTDOWN_HEAD_S: Final = 0.5  # stopping: a request already on its way is still read
 RESERVE: Final = 16  # beyond MAX_CONNECTIONS, for stops only, when none is idle
