@@ -57,6 +57,7 @@ from fcmaster.config import Config
 from fcmaster.errors import ConfigError
 from fcmaster.hub import Hub
 from fcmaster.journal import Journal
+from fcmaster.process_limits import RepeatedErrors, fit_file_limit
 from fcmaster.reload import Reloader
 from fcmaster.state import FleetState
 from fcmaster.store_settings import StoreSettings
@@ -259,12 +260,14 @@ class Service:
     async def run(self, *, install_signals: bool = True) -> None:
         """Run until :meth:`stop` or SIGTERM/SIGINT; then shut down in order."""
         loop = asyncio.get_running_loop()
-        if install_signals:
+        if install_signals:  # the process is ours: its signals, its files, its loop's errors
             for sig in (signal.SIGTERM, signal.SIGINT):
                 loop.add_signal_handler(sig, self.stop)
             # SIGHUP's default action ends the process on the spot (no on_shutdown, and
             # systemd counts it a clean exit): here it asks for a reload.
             loop.add_signal_handler(signal.SIGHUP, self.request_reload)
+            fit_file_limit()
+            RepeatedErrors(loop).install()
         try:
             async with AsyncExitStack() as stack:
                 # First in, last out: it sees the lines open and every command end.

@@ -186,7 +186,7 @@ def create_app(
 
     @app.exception_handler(AuthError)
     async def _autherror_body(request: Request, exc: AuthError) -> Response:
-        if request.method in ("POST", "PUT"):
+        if request.method in ("POST", "PUT") and not exc.counted:  # wrong tokens: in aggregate
             log_refused(
                 exc.actor,
                 request.path_params.get("name"),
@@ -195,6 +195,8 @@ def create_app(
                 exc.reason,
             )
         headers = {"WWW-Authenticate": "Bearer"} if exc.status == 401 else None
+        if exc.retry_after_s:
+            headers = {"Retry-After": str(max(1, round(exc.retry_after_s)))}
         return json_response(error_body(exc.reason), exc.status, headers=headers)
 
     @app.exception_handler(RequestValidationError)

@@ -16,6 +16,10 @@ all: then the API is read-only) *and* the request comes from the loopback interf
 names a loopback host (``Host: 127.0.0.1:8080``, ``localhost``, ``[::1]``). The last check
 keeps a web page in the operator's browser from reading the fleet through a DNS name that
 it re-binds to 127.0.0.1.
+
+Guessing is slowed and told in aggregate on the HTTP listener
+(:class:`~fcmaster.adapters.auth_failures.FailedAuthentications`): past a few wrong tokens
+an address is answered 429 for a while, without its tokens being looked at.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import hmac
 import ipaddress
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Protocol
 
 from fcmaster.errors import ConfigError, FcmasterError
 
@@ -58,11 +63,25 @@ ANONYMOUS = "anonymous"
 class AuthError(FcmasterError):
     """The request cannot be let through; ``status`` is 401 or 403."""
 
-    def __init__(self, status: int, reason: str, *, actor: str = "-") -> None:
+    def __init__(
+        self, status: int, reason: str, *, actor: str = "-", retry_after_s: float = 0.0
+    ) -> None:
         self.status = status
         self.reason = reason
         self.actor = actor  # the token's name when it was recognised
+        self.retry_after_s = retry_after_s  # 429: when the address may try again
+        self.counted = False  # logged in aggregate by FailedAuthentications: not one by one
         super().__init__(reason)
+
+
+class Throttle(Protocol):
+    """Counts wrong tokens per address (``auth_failures.FailedAuthentications``)."""
+
+    def check(self, host: str) -> None:
+        """AuthError (429) while ``host`` may not try again."""
+
+    def fail(self, host: str, error: AuthError) -> None:
+        """``host`` presented a token that let it nowhere."""
 
 
 @dataclass(slots=True, frozen=True)
@@ -137,9 +156,19 @@ def listen_problem(listen: str, *, has_tokens: bool) -> str:
 class Authenticator:
     """Checks bearer tokens and the anonymous rules (see the module docstring)."""
 
-    def __init__(self, tokens: Iterable[tuple[str, Role, str]], *, anonymous: bool) -> None:
-        """Tokens as ``(name, role, secret)``; ``anonymous``: let loopback reads through."""
+    def __init__(
+        self,
+        tokens: Iterable[tuple[str, Role, str]],
+        *,
+        anonymous: bool,
+        failures: Throttle | None = None,
+    ) -> None:
+        """Tokens as ``(name, role, secret)``; ``anonymous``: let loopback reads through.
+
+        ``failures`` counts and throttles wrong tokens per client address (HTTP).
+        """
         self._tokens = tuple(_Token(name, role, _digest(secret)) for name, role, secret in tokens)
+        self.failures = failures
         # With no token at all nobody could read: the API is then read-only for loopback.
         self.anonymous = anonymous or not self._tokens
 
@@ -151,12 +180,23 @@ class Authenticator:
     def authenticate(
         self, authorization: str | None, *, client_host: str | None, host_header: str | None
     ) -> Principal:
-        """The caller of one request; AuthError (401) when it cannot be let in at all."""
+        """The caller of one request; AuthError (401) when it cannot be let in at all.
+
+        429 while its address is throttled for wrong tokens.
+        """
         if authorization is not None:
-            scheme, _, secret = authorization.strip().partition(" ")
-            if scheme.lower() != "bearer" or not secret.strip():
-                raise AuthError(401, "send the token as 'Authorization: Bearer <token>'")
-            return self._match(secret.strip())
+            host = client_host or "?"
+            if self.failures is not None:
+                self.failures.check(host)
+            try:
+                scheme, _, secret = authorization.strip().partition(" ")
+                if scheme.lower() != "bearer" or not secret.strip():
+                    raise AuthError(401, "send the token as 'Authorization: Bearer <token>'")
+                return self._match(secret.strip())
+            except AuthError as error:
+                if self.failures is not None:
+                    self.failures.fail(host, error)
+                raise
         if self.anonymous and is_loopback_host(client_host) and is_loopback_host(host_header):
             return Principal(ANONYMOUS, Role.VIEWER, anonymous=True)
         if self.anonymous:

@@ -39,12 +39,15 @@ from fcmaster.adapters.auth import (
     listen_problem,
     parse_listen,
 )
+from fcmaster.adapters.auth_failures import FailedAuthentications
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.http_guard import HEAD_TIMEOUT_S, ConnectionGuard, guarded_protocol
+from fcmaster.adapters.http_streams import guarded_stream
 from fcmaster.adapters.settings import HttpSettings
 from fcmaster.adapters.stream import StreamRegistry
 from fcmaster.errors import ConfigError
 from fcmaster.offloop import run_off_loop
+from fcmaster.process_limits import connection_budget
 
 log = structlog.get_logger("fcmaster.adapters.http")
 
@@ -93,10 +96,16 @@ class HttpAdapter:
         self.operator_token: str | None = None  # the demo's, once entered
         self._streams = StreamRegistry()
         self.guard = ConnectionGuard(clock=gateway.clock)
+        self.failures = FailedAuthentications(gateway.clock.now)  # wrong tokens per address
         self._server: _Server | None = None
         self._task: asyncio.Task[None] | None = None
         self._socket: socket.socket | None = None
         self._address: tuple[str, int] | None = None
+
+    @property
+    def streams(self) -> StreamRegistry:
+        """The open WebSocket streams."""
+        return self._streams
 
     @property
     def url(self) -> str:
@@ -114,7 +123,11 @@ class HttpAdapter:
         if self.demo:
             self.operator_token = secrets.token_urlsafe(24)
             tokens.append((DEMO_TOKEN_NAME, Role.OPERATOR, self.operator_token))
-        return Authenticator(tokens, anonymous=self.settings.anonymous == "viewer" or not tokens)
+        return Authenticator(
+            tokens,
+            anonymous=self.settings.anonymous == "viewer" or not tokens,
+            failures=self.failures,
+        )
 
     def _bind(self, host: str, port: int) -> socket.socket:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -129,6 +142,7 @@ class HttpAdapter:
         if self._task is not None:
             raise RuntimeError("the HTTP adapter is already running")
         host, port = parse_listen(self.settings.listen)
+        self.guard.fit(connection_budget())  # what the open-file limit leaves to connections
         auth = self._authenticator(host)
         # About 0.1 s of Python: off the loop, as a reload starts it while the lines run.
         app = await run_off_loop(
@@ -147,7 +161,7 @@ class HttpAdapter:
             log_level="warning",
             access_log=False,  # and so ?token= never lands in a log
             lifespan="off",
-            ws="websockets-sansio",
+            ws=guarded_stream(self.guard),  # counted, and dropped when it stops reading
             ws_max_size=MAX_BODY_BYTES,
             proxy_headers=False,  # the peer address decides loopback, not X-Forwarded-For
             server_header=False,

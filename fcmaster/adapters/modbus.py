@@ -27,8 +27,16 @@ Safety rules (DESIGN.md "Safety and trust"): the listener is 127.0.0.1:5020 unle
 (config validation refuses it otherwise); a connection from an address outside the allow
 list (loopback only when there is none) is closed before a byte is read. Writes are
 refused with ILLEGAL_FUNCTION unless ``modbus.commands: true``, and a refused write never
-reaches a line. A header that is not Modbus TCP closes its connection; a half frame is
-given :data:`PARTIAL_FRAME_S` to be completed.
+reaches a line. A header that is not Modbus TCP closes its connection; a frame begun is
+given :data:`PARTIAL_FRAME_S` from its first byte to be completed (a byte now and then does
+not keep it open), and a connection that sends nothing for :data:`IDLE_TIMEOUT_S` is closed.
+
+No client locks the others out: when :data:`MAX_CONNECTIONS` are open, a new connection
+takes the place of the one that has waited longest for its next request (the oldest idle
+one), so silent connections cannot keep a PLC out. And no client flood slows the lines:
+every request's answer is paced by one budget for the whole server (:class:`AnswerBudget`,
+:data:`REQUESTS_PER_S`), so what the server costs the shared event loop is bounded per
+second however many clients poll how fast; beyond it answers wait, their clients with them.
 """
 
 from __future__ import annotations
@@ -37,6 +45,7 @@ import asyncio
 import contextlib
 import ipaddress
 import socket
+from collections import OrderedDict
 from collections.abc import Sequence
 from types import TracebackType
 from typing import Any, Final
@@ -65,6 +74,7 @@ from fcmaster.adapters.modbus_map import (
     register_map,
 )
 from fcmaster.adapters.settings import ModbusSettings, modbus_listen
+from fcmaster.adapters.tcp import no_delay
 from fcmaster.bus.audit import audit, payload_values
 from fcmaster.bus.commands import CommandResult, Outcome
 from fcmaster.bus.plan import LinePlan
@@ -72,8 +82,11 @@ from fcmaster.errors import ConfigError, FcmasterError, UsageError
 
 log = structlog.get_logger("fcmaster.adapters.modbus")
 
-MAX_CONNECTIONS: Final = 64  # beyond this a new connection is closed: bounded memory
+MAX_CONNECTIONS: Final = 64  # beyond this the oldest idle one makes room: bounded memory
 PARTIAL_FRAME_S: Final = 5.0  # a frame begun must be whole by then (a stalled client)
+IDLE_TIMEOUT_S: Final = 60.0  # a connection that sends nothing this long is closed
+REQUESTS_PER_S: Final = 1000.0  # answers per second, all clients together (5 × 20 PLCs at 10 Hz)
+REQUESTS_BURST: Final = 100  # answered at once after a quiet spell
 SEND_TIMEOUT_S: Final = 10.0  # a client that stops reading its answers is dropped
 READ_CHUNK: Final = 4096
 SHUTDOWN_GRACE_S: Final = 2.0  # writes in progress may get their answer
@@ -98,6 +111,26 @@ class _Refused(FcmasterError):
         self.code = code
 
 
+class AnswerBudget:
+    """Answers per second for the whole server (a generic cell rate: fair, first come)."""
+
+    def __init__(self, per_s: float, burst: int) -> None:
+        self.interval = 1.0 / per_s
+        self.burst_s = (burst - 1) * self.interval  # so that exactly `burst` go at once
+        self._due = 0.0  # when the budget is spent up to (the loop's time)
+        self.waited = 0  # answers that had to wait for the budget
+
+    def delay(self, now: float) -> float:
+        """Take one answer's share: how long to wait before giving it (0: at once)."""
+        due = max(self._due, now)
+        self._due = due + self.interval
+        wait = due - self.burst_s - now
+        if wait <= 0:
+            return 0.0
+        self.waited += 1
+        return wait
+
+
 class ModbusAdapter:
     """Serves the register map while the context is entered.
 
@@ -113,10 +146,16 @@ class ModbusAdapter:
         lines: Sequence[LinePlan],
         demo: bool = False,
         partial_frame_s: float = PARTIAL_FRAME_S,
+        idle_timeout_s: float = IDLE_TIMEOUT_S,
+        max_connections: int = MAX_CONNECTIONS,
+        requests_per_s: float = REQUESTS_PER_S,
         shutdown_grace_s: float = SHUTDOWN_GRACE_S,
     ) -> None:
         self.settings = settings
         self.partial_frame_s = partial_frame_s
+        self.idle_timeout_s = idle_timeout_s
+        self.max_connections = max_connections
+        self.budget = AnswerBudget(requests_per_s, REQUESTS_BURST)
         self.shutdown_grace_s = shutdown_grace_s
         self.gateway = gateway
         self.map = register_map(lines, settings.units)
@@ -124,6 +163,9 @@ class ModbusAdapter:
         self._server: asyncio.Server | None = None
         self._connections: set[asyncio.Task[None]] = set()
         self._busy: set[asyncio.Task[None]] = set()  # answering a request right now
+        # waiting for a request head with nothing begun, longest waiting first
+        self._idle: OrderedDict[asyncio.Task[None], None] = OrderedDict()
+        self.evicted = 0
         self._quiet = asyncio.Event()  # set while no request is being answered
         self._quiet.set()
         self._closing = False
@@ -207,19 +249,33 @@ class ModbusAdapter:
 
         The task is ours rather than the server's, so the adapter can end it at shutdown.
         """
+        no_delay(writer.transport)  # an answer goes out at once, not after the client's ACK
         peer = writer.get_extra_info("peername") or ("?", 0)
         host, port = str(peer[0]), int(peer[1])
         actor = f"modbus:[{host}]:{port}" if ":" in host else f"modbus:{host}:{port}"
-        if not self._allowed(host) or len(self._connections) >= MAX_CONNECTIONS:
+        if not self._allowed(host) or (
+            len(self._connections) >= self.max_connections and not self._idle
+        ):
             why = "not in modbus.allow" if not self._allowed(host) else "too many connections"
             log.warning("modbus.client_refused", client=actor, reason=why)
             writer.close()
             return
+        if len(self._connections) >= self.max_connections:  # the longest idle makes room
+            oldest = next(iter(self._idle))
+            del self._idle[oldest]
+            self._connections.discard(oldest)
+            oldest.cancel()
+            self.evicted += 1
+            log.info("modbus.client_evicted", client=oldest.get_name(), to_admit=actor)
         task = asyncio.create_task(
             self._connection(reader, writer, actor), name=f"modbus.client[{actor}]"
         )
         self._connections.add(task)
-        task.add_done_callback(self._connections.discard)
+        task.add_done_callback(self._gone)
+
+    def _gone(self, task: asyncio.Task[None]) -> None:
+        self._connections.discard(task)
+        self._idle.pop(task, None)
 
     async def _connection(
         self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, actor: str
@@ -239,18 +295,43 @@ class ModbusAdapter:
         self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, actor: str
     ) -> None:
         framer = MbapFramer()
+        task = asyncio.current_task()
+        assert task is not None
+        loop = asyncio.get_running_loop()
+        begun: float | None = None  # when the frame being received began
         while True:
             item = framer.next_item()
             if item is None:
-                if framer.pending:  # a frame begun must be finished in time
-                    async with asyncio.timeout(self.partial_frame_s):
+                if not framer.pending:
+                    begun = None
+                    self._idle[task] = None  # the newest idle one
+                elif begun is None:
+                    begun = loop.time()
+                # A frame begun must be whole in time from its first byte, however its
+                # bytes trickle in; between requests, a client has the idle timeout.
+                deadline = (
+                    loop.time() + self.idle_timeout_s
+                    if begun is None
+                    else begun + self.partial_frame_s
+                )
+                try:
+                    async with asyncio.timeout_at(deadline):
                         data = await reader.read(READ_CHUNK)
-                else:
-                    data = await reader.read(READ_CHUNK)
+                except TimeoutError:
+                    why = (
+                        f"sent nothing for {self.idle_timeout_s:g} s"
+                        if begun is None
+                        else (f"a frame not whole {self.partial_frame_s:g} s after its first byte")
+                    )
+                    log.info("modbus.client_dropped", client=actor, reason=why)
+                    return
+                finally:
+                    self._idle.pop(task, None)
                 if not data:
                     return
                 framer.feed(data)
                 continue
+            begun = None
             if self._closing:
                 return
             if isinstance(item, Broken):
@@ -259,11 +340,12 @@ class ModbusAdapter:
                     frame=item.data[:16].hex(" "),
                 )  # fmt: skip
                 return
-            task = asyncio.current_task()
-            assert task is not None
             self._busy.add(task)
             self._quiet.clear()
             try:
+                wait = self.budget.delay(loop.time())
+                if wait:  # the server's answers per second are spent: this one waits
+                    await asyncio.sleep(wait)
                 answer = await self._answer(item, actor)
             except asyncio.CancelledError:  # shutdown: the request still gets its one answer
                 code = ExceptionCode.GATEWAY_PATH_UNAVAILABLE

@@ -27,9 +27,15 @@ each payload carries ``"token"``, an operator token of ``http.tokens`` whose nam
 audit's actor, unless ``mqtt.trust_broker: true`` leaves it to the broker's ACLs (the actor is
 then the bridge's own ``mqtt:{client_id}``).
 
-The session is clean (``clean_session``): commands published while the gateway was away are
-not replayed to it later, when they may no longer be wanted — their senders see no result
-and time out.
+The session outlives an absence: the bridge subscribes at QoS 1 with ``clean_session``
+off under a client id that stays the same (``mqtt.client_id``, or one made of the host name,
+the base topic and the lines), so commands published while it reconnects (a broker restart
+with persistence, a network blip) wait at the broker and are carried out when it is back,
+each with its result. A restart of the gateway itself leaves nothing to replay: before its
+first session the bridge connects once with a clean session, which drops whatever was
+queued for it while it was not running — such a command may no longer be wanted; its
+sender saw no result. A command that must not run late at all is best published with a
+message expiry (MQTT 5), which the broker honours while it waits.
 
 Shutdown: commands still running get a bounded grace, then end ``cancelled``; the drives'
 availability and the gateway's status turn ``offline``; the outbox is flushed (bounded, and
@@ -40,8 +46,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hashlib
 import random
-import secrets
 import socket
 import ssl
 from collections.abc import Iterable
@@ -105,14 +111,17 @@ class MqttAdapter:
         self._gateway = gateway
         self._clock = gateway.clock
         self._topics = Topics(settings.base_topic, settings.status_topic)
+        self._buses = [line.name for line in gateway.lines()]
+        # The same id from one start to the next, so the broker keeps one session for us.
+        mark = hashlib.sha256("\n".join([settings.base_topic, *self._buses]).encode())
         self.client_id = (
-            settings.client_id or f"fcmaster-{socket.gethostname()}-{secrets.token_hex(3)}"
+            settings.client_id or f"fcmaster-{socket.gethostname()}-{mark.hexdigest()[:6]}"
         )
+        self._stale_session = True  # what the broker kept from before we started
         parts = urlsplit(settings.url)
         self._host = parts.hostname or ""
         self._port = parts.port or (8883 if parts.scheme == "mqtts" else 1883)
         self._tls = _tls_context(settings) if parts.scheme == "mqtts" else None
-        self._buses = [line.name for line in gateway.lines()]
         for name in [*self._buses, *(state.name for state in gateway.fleet.snapshot())]:
             if not name or set(name) & {"/", "+", "#"}:
                 raise ConfigError([("mqtt", f"{name!r} cannot be an MQTT topic level")])
@@ -289,7 +298,7 @@ class MqttAdapter:
             attempt += 1
             await self._clock.sleep(delay * self._rng.uniform(0.5, 1.0))
 
-    def _client(self) -> aiomqtt.Client:
+    def _client(self, *, clean: bool = False) -> aiomqtt.Client:
         settings = self._settings
         client = aiomqtt.Client(
             self._host,
@@ -298,7 +307,8 @@ class MqttAdapter:
             username=settings.username,
             password=settings.password,
             will=aiomqtt.Will(self._topics.status, OFFLINE, qos=1, retain=True),
-            clean_session=True,  # commands queued while we were away are not replayed
+            # Commands for us wait at the broker while we reconnect (see the module docstring).
+            clean_session=clean,
             keepalive=settings.keepalive_s,
             tls_context=self._tls,
             # small packets (a PUBACK, then the result) must not wait for a delayed ACK
@@ -308,6 +318,10 @@ class MqttAdapter:
         return client
 
     async def _session(self) -> None:
+        if self._stale_session:  # queued before we started: not ours to carry out
+            async with self._client(clean=True):
+                pass
+            self._stale_session = False
         async with self._client() as client:
             for bus in self._buses:
                 granted = await client.subscribe(self._topics.commands(bus), qos=1)

@@ -50,7 +50,7 @@ class MqttSettings:
     url: str = "mqtt://127.0.0.1:1883"
     base_topic: str = "fcmaster"
     status_topic: str | None = None  # None: {base_topic}/status
-    client_id: str | None = None  # None: fcmaster-{hostname}-{random}
+    client_id: str | None = None  # None: fcmaster-{hostname}-{digest of base topic, lines}
     username: str | None = None
     password: str | None = None
     tls: TlsSettings | None = None

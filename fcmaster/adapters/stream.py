@@ -1,4 +1,4 @@
-"""The WebSocket event stream: one hub subscription and one serialising task per client.
+"""The WebSocket event stream: one hub subscription and one sending task per client.
 
 Theory of operation
 -------------------
@@ -9,10 +9,15 @@ and is sent a ``snapshot`` of every drive and line, then one message per fleet e
 taken, so nothing falls between the two.
 
 The bus never waits for a client: the hub files events with the subscription and returns;
-this client's own task takes them out, serialises them and sends. A slow client makes its
-own send wait (the socket's back-pressure), while its subscription conflates drive states
-(latest wins) and bounds discrete events, telling the client with a ``dropped`` message.
-A second task reads the client's side only to notice a disconnect at once.
+this client's own task takes them out and sends them. Each event is serialised once for
+all the streams that send it (:class:`EventTexts`), and a stream sends what gathered at
+most every :data:`BATCH_S`: between sends its subscription conflates drive states (latest
+wins), so a hundred streams cost a hundred sends of each drive's latest state a batch, not
+of every reply. A slow client makes its own send wait (the socket's back-pressure), while
+its subscription conflates drive states and bounds discrete events, telling the client
+with a ``dropped`` message; one that reads nothing at all is dropped by the connection
+guard (:mod:`.http_guard`). A second task reads the client's side only to notice a
+disconnect at once.
 
 Browsers send ``Origin``; a stream is refused unless the origin is the page's own (same
 host) or listed in ``http.cors_origins``, so another site open in the operator's browser
@@ -22,6 +27,8 @@ cannot read the fleet through a loopback connection.
 from __future__ import annotations
 
 import asyncio
+from collections import OrderedDict
+from typing import Final
 from urllib.parse import urlsplit
 
 import structlog
@@ -32,19 +39,59 @@ from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.messages import event_json
 from fcmaster.adapters.middleware import states_json, strict_json
 from fcmaster.drive_state import DriveState
-from fcmaster.hub import Subscription
+from fcmaster.hub import EventsDropped, Subscription
+from fcmaster.state import DriveUpdated, Event
 
 log = structlog.get_logger("fcmaster.adapters.http")
 
 POLICY_VIOLATION = 1008
 GOING_AWAY = 1001
+BATCH_S: Final = 0.1  # a stream sends what gathered at most this often (10 Hz)
+TEXTS_KEPT: Final = 1024  # recent events' messages kept for the other streams
+
+
+class EventTexts:
+    """Each event's message, serialised once for every stream that sends it.
+
+    The hub hands every subscription the same event object, so the object's identity is
+    the key (the entry holds the object, so its id is not reused while kept). A drive
+    update conflated in a subscription is a new object, but the same drive state with the
+    same changes: those are keyed by the state's identity and the changed fields.
+    """
+
+    def __init__(self, kept: int = TEXTS_KEPT) -> None:
+        self._kept = kept
+        self._texts: OrderedDict[object, tuple[object, str]] = OrderedDict()
+        self.serialised = 0  # events turned into text (the rest were found here)
+
+    def text(self, item: Event | EventsDropped) -> str:
+        """``item``'s stream message."""
+        if isinstance(item, EventsDropped):  # one stream's own news
+            return strict_json(event_json(item))
+        pinned: object = item
+        key: object = id(item)
+        if isinstance(item, DriveUpdated):
+            pinned, key = item.state, (id(item.state), item.changed)
+        found = self._texts.get(key)
+        if found is not None:
+            return found[1]
+        text = strict_json(event_json(item))
+        self.serialised += 1
+        self._texts[key] = (pinned, text)
+        if len(self._texts) > self._kept:
+            self._texts.popitem(last=False)
+        return text
 
 
 class StreamRegistry:
-    """The open streams' subscriptions, so the adapter can end them all at shutdown."""
+    """The open streams' subscriptions, and the messages they share.
+
+    The adapter ends every open stream at shutdown through it.
+    """
 
     def __init__(self) -> None:
         self._open: set[Subscription] = set()
+        self.texts = EventTexts()
 
     def add(self, subscription: Subscription) -> None:
         """Track an open stream."""
@@ -129,7 +176,7 @@ async def serve_stream(
         await websocket.send_text(
             f'{{"type": "snapshot", "drives": {drives}, "buses": {lines}, "limits": {limits}}}'
         )
-        await _serve(websocket, subscription)
+        await _serve(websocket, subscription, registry.texts)
     except (WebSocketDisconnect, OSError):
         pass  # the client left while we were sending
     finally:
@@ -138,9 +185,11 @@ async def serve_stream(
         log.debug("http.stream_closed", actor=principal.name, dropped=subscription.dropped)
 
 
-async def _serve(websocket: WebSocket, subscription: Subscription) -> None:
+async def _serve(websocket: WebSocket, subscription: Subscription, texts: EventTexts) -> None:
     reader = asyncio.create_task(_until_disconnect(websocket), name="http.stream.reader")
-    writer = asyncio.create_task(_send_events(websocket, subscription), name="http.stream.writer")
+    writer = asyncio.create_task(
+        _send_events(websocket, subscription, texts), name="http.stream.writer"
+    )
     try:
         done, _ = await asyncio.wait((reader, writer), return_when=asyncio.FIRST_COMPLETED)
     finally:
@@ -162,6 +211,8 @@ async def _until_disconnect(websocket: WebSocket) -> None:
             return
 
 
-async def _send_events(websocket: WebSocket, subscription: Subscription) -> None:
+async def _send_events(websocket: WebSocket, subscription: Subscription, texts: EventTexts) -> None:
     async for item in subscription:
-        await websocket.send_text(strict_json(event_json(item)))
+        await websocket.send_text(texts.text(item))
+        if not subscription.pending:  # sent all that gathered: let the next batch gather
+            await asyncio.sleep(BATCH_S)

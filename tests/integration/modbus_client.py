@@ -68,13 +68,14 @@ class Client:
     async def closed_by_server(self) -> bool:
         """Whether the server closes the connection, answering nothing (bounded wait).
 
-        A socket closed with our bytes unread resets the connection: that is closed too.
+        A socket closed with our bytes unread resets the connection, and one closed while we
+        were still sending breaks our pipe: those are closed too.
         """
         assert self._reader is not None
         try:
             async with asyncio.timeout(self.timeout_s):
                 return await self._reader.read(1024) == b""
-        except ConnectionResetError:
+        except (ConnectionResetError, BrokenPipeError):
             return True
 
     async def request(self, unit: int, pdu: bytes) -> bytes:

@@ -9,11 +9,12 @@ import random
 import struct
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
+from typing import Any
 
 import pytest
 from structlog.testing import capture_logs
 
-from fcmaster.adapters.modbus import ModbusAdapter
+from fcmaster.adapters.modbus import MAX_CONNECTIONS, REQUESTS_BURST, ModbusAdapter
 from fcmaster.adapters.settings import ModbusSettings
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.config import parse
@@ -43,12 +44,15 @@ async def serving(
     commands: bool = True,
     wall: Callable[[], float] | None = None,
     partial_frame_s: float = 5.0,
+    **options: Any,
 ) -> AsyncIterator[tuple[FakeGateway, ModbusAdapter]]:
     config = parse(CONFIG)
     clock = None if wall is None else WallShiftedClock(wall)
     gateway = FakeGateway(config.lines, respond, clock=clock)
     settings = ModbusSettings(listen="127.0.0.1:0", commands=commands, units=config.modbus_units())
-    adapter = ModbusAdapter(settings, gateway, lines=config.lines, partial_frame_s=partial_frame_s)
+    adapter = ModbusAdapter(
+        settings, gateway, lines=config.lines, partial_frame_s=partial_frame_s, **options
+    )
     async with asyncio.timeout(LIMIT_S), adapter:
         yield gateway, adapter
 
@@ -358,3 +362,62 @@ async def test_each_action_code_is_the_action_design_names(code: int, action: Ac
     async with serving() as (gateway, adapter), Client(*adapter.address) as client:
         await client.write_single(1, 0, code)
     assert [(d, c.action) for d, c in gateway.executed] == [("pump-1", action)]
+
+
+async def test_a_full_server_lets_a_plc_in_in_the_place_of_the_oldest_idle_connection() -> None:
+    async with serving() as (_, adapter), contextlib.AsyncExitStack() as stack:
+        silent = [
+            await stack.enter_async_context(Client(*adapter.address, timeout_s=5.0))
+            for _ in range(MAX_CONNECTIONS)
+        ]
+        await asyncio.sleep(0.1)  # every one of them is being served, and idle
+        async with Client(*adapter.address) as plc:
+            assert (await plc.read_input(1, 0, 1)) == [0]
+            assert await silent[0].closed_by_server()  # the one idle longest made room
+            assert (await silent[1].read_input(1, 0, 1)) == [0]  # the others keep theirs
+            assert adapter.evicted == 1
+            async with Client(*adapter.address) as second:  # and again, the next oldest
+                assert (await second.read_input(2, 0, 1)) == [0]
+                assert await silent[2].closed_by_server()
+            assert (await plc.read_input(1, 0, 1)) == [0]
+
+
+async def test_a_frame_sent_a_byte_now_and_then_is_dropped() -> None:
+    with capture_logs() as logs:
+        async with (
+            serving(partial_frame_s=0.5) as (_, adapter),
+            Client(*adapter.address, timeout_s=5.0) as trickle,
+        ):
+            frame = bytes.fromhex("0009 0000 0006 01 04 0000 0001")
+            with contextlib.suppress(ConnectionError):
+                for byte in frame:  # each gap shorter than the 0.5 s, all together longer
+                    await trickle.send_raw(bytes((byte,)))
+                    await asyncio.sleep(0.2)
+            assert await trickle.closed_by_server()  # not answered: dropped on the way
+    reasons = [e["reason"] for e in logs if e["event"] == "modbus.client_dropped"]
+    assert reasons == ["a frame not whole 0.5 s after its first byte"]
+
+
+async def test_a_connection_that_sends_nothing_is_closed_after_the_idle_timeout() -> None:
+    async with (
+        serving(idle_timeout_s=0.5) as (_, adapter),
+        Client(*adapter.address, timeout_s=5.0) as silent,
+        Client(*adapter.address) as polling,
+    ):
+        for _ in range(6):  # a PLC polling every 0.2 s keeps its connection
+            assert (await polling.read_input(1, 0, 1)) == [0]
+            await asyncio.sleep(0.2)
+        assert await silent.closed_by_server()
+        assert (await polling.read_input(1, 0, 1)) == [0]
+
+
+async def test_a_read_flood_is_answered_within_the_server_s_budget() -> None:
+    async with serving(requests_per_s=100.0) as (_, adapter):
+
+        async def flood() -> list[int]:
+            async with Client(*adapter.address) as client:
+                return [(await client.read_input(1, 0, 1))[0] for _ in range(REQUESTS_BURST)]
+
+        answers = await asyncio.gather(flood(), flood())
+        assert list(answers) == [[0] * REQUESTS_BURST] * 2  # every read answered, and rightly
+        assert adapter.budget.waited >= REQUESTS_BURST - 10  # beyond the burst, paced
