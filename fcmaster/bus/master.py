@@ -43,14 +43,14 @@ from functools import partial
 
 import structlog
 
-from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.bus.frame_log import FrameLog
 from fcmaster.bus.link import Link
 
 # BusObserver is named here too, where the layers above have always found it.
 from fcmaster.bus.observer import BusObserver as BusObserver
 from fcmaster.bus.observer import NullObserver
-from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.planner import Completion, Planner, Step, StepKind
 from fcmaster.bus.reporting import LineReporter
 from fcmaster.bus.stats import DriveStats, LineStats
@@ -420,118 +420,3 @@ class BusMaster:
     def recent_frames(self) -> list[str]:
         """The line's last frames and events, oldest first (the flight recorder)."""
         return self._link.recent_frames()
-
-
-class Drive:
-    """A handle on one drive of a running BusMaster. Every method returns one result."""
-
-    __slots__ = ("_master", "plan")
-
-    def __init__(self, master: BusMaster, plan: DrivePlan) -> None:
-        self._master = master
-        self.plan = plan
-
-    @property
-    def name(self) -> str:
-        """The drive's configured name."""
-        return self.plan.name
-
-    async def execute(self, command: Command) -> CommandResult:
-        """Carry out any command."""
-        return await self._master.execute(self.plan.name, command)
-
-    def reference_pct(
-        self, frequency_hz: float | None, reference_pct: float | None
-    ) -> float | None:
-        """A reference in % of nominal frequency from whichever of the two is given."""
-        if frequency_hz is not None:
-            return frequency_hz / self.plan.nominal_frequency_hz * 100.0
-        return reference_pct
-
-    async def start(
-        self,
-        *,
-        frequency_hz: float | None = None,
-        reference_pct: float | None = None,
-        actor: str = "",
-    ) -> CommandResult:
-        """Run, optionally at a new reference."""
-        return await self.execute(
-            Command(
-                action=Action.START,
-                reference_pct=self.reference_pct(frequency_hz, reference_pct),
-                actor=actor,
-            )
-        )
-
-    async def set_reference(
-        self,
-        *,
-        frequency_hz: float | None = None,
-        reference_pct: float | None = None,
-        actor: str = "",
-    ) -> CommandResult:
-        """Change the reference without changing the motion."""
-        pct = self.reference_pct(frequency_hz, reference_pct)
-        if pct is None:
-            return CommandResult(
-                outcome=Outcome.INVALID, reason="give frequency_hz or reference_pct"
-            )
-        return await self.execute(
-            Command(action=Action.SET_REFERENCE, reference_pct=pct, actor=actor)
-        )
-
-    async def stop(self, *, actor: str = "") -> CommandResult:
-        """Ramp down and stay ready."""
-        return await self.execute(Command(action=Action.STOP, actor=actor))
-
-    async def coast(self, *, actor: str = "") -> CommandResult:
-        """Switch the output off; the motor free-wheels."""
-        return await self.execute(Command(action=Action.COAST, actor=actor))
-
-    async def quick_stop(self, *, actor: str = "") -> CommandResult:
-        """Ramp down on the quick-stop ramp."""
-        return await self.execute(Command(action=Action.QUICK_STOP, actor=actor))
-
-    async def reset(self, *, actor: str = "") -> CommandResult:
-        """Acknowledge a trip (a pulse; the motor does not restart by itself)."""
-        return await self.execute(Command(action=Action.RESET, actor=actor))
-
-    async def forward(self, *, actor: str = "") -> CommandResult:
-        """Turn forward."""
-        return await self.execute(Command(action=Action.FORWARD, actor=actor))
-
-    async def reverse(self, *, actor: str = "") -> CommandResult:
-        """Turn in reverse."""
-        return await self.execute(Command(action=Action.REVERSE, actor=actor))
-
-    async def jog(self, *, actor: str = "") -> CommandResult:
-        """Run at the jog speed."""
-        return await self.execute(Command(action=Action.JOG, actor=actor))
-
-    async def read(self, parameter: str, *, index: int = 0, actor: str = "") -> CommandResult:
-        """Read a parameter; the value is in ``result.value``."""
-        return await self.execute(
-            Command(action=Action.READ, parameter=parameter, index=index, actor=actor)
-        )
-
-    async def write(
-        self,
-        parameter: str,
-        value: float,
-        *,
-        index: int = 0,
-        persist: bool = False,
-        actor: str = "",
-    ) -> CommandResult:
-        """Write a parameter (``persist``: to non-volatile memory too)."""
-        return await self.execute(
-            Command(
-                action=Action.WRITE,
-                parameter=parameter,
-                index=index,
-                value=value,
-                persist=persist,
-                actor=actor,
-            )
-        )
