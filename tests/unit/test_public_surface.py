@@ -62,6 +62,13 @@ FACES: dict[str, set[str]] = {
         "is_paged", "lookup", "parse_ascii_frame", "parse_parameter", "resolve", "run_command",
         "split_terminator", "sum_check", "wait_digit",
     },
+    "fcmaster.protocol.modbus_rtu": {
+        "ADDRESSES", "BROADCAST", "EXCEPTION_TEXTS", "MAX_FRAME", "MAX_READ", "MAX_WRITE",
+        "Direction", "ExceptionCode", "ExceptionReply", "Function", "ReadRequest", "Registers",
+        "Request", "Response", "RtuFramer", "WriteMultiple", "WriteSingle", "Written", "crc16",
+        "crc_ok", "decode_request", "decode_response", "encode_request", "encode_response",
+        "exception_text", "reply_length", "with_crc",
+    },
     "fcmaster.sim": {
         "DriveSettings", "EncSimDrive", "FaultPlan", "FcSimDrive", "LineCounters",
         "LineSettings", "MitsubishiSimDrive", "Mode", "Motor", "MotorCommand", "MotorRating",
