@@ -43,6 +43,7 @@ from fcmaster.adapters.settings import HttpSettings, ModbusSettings, MqttSetting
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.config_modbus import check_modbus, modbus_units
+from fcmaster.config_profiles import drive_profile
 from fcmaster.config_sections import (
     HttpModel,
     LoggingModel,
@@ -98,6 +99,8 @@ class DriveModel(_Model):
     # seconds the status may take to show a start's or stop's result (None: a default)
     confirm_s: float | None = Field(default=None, gt=0, le=600)
     watchdog: WatchdogModel | None = None
+    # modbus-rtu: a built-in drive profile's name or a profile file (config_profiles)
+    profile: str | None = Field(default=None, min_length=1)
 
 
 class BusFields(_Model):
@@ -248,7 +251,7 @@ def parse(
             _check(partial, more)
             problems += [(renumber(path), renumber(reason)) for path, reason in more]
     else:
-        lines = _check(model, problems)
+        lines = _check(model, problems, path)
     if unset:  # what an unset variable left empty is not a problem of its own
         blank = {where for where, _ in unset}
         problems = unset + [(where, why) for where, why in problems if where not in blank]
@@ -311,7 +314,10 @@ def _valid(model: type[BaseModel], value: Any) -> bool:
     return True
 
 
-def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePlan, ...]:
+def _check(
+    model: ConfigModel, problems: list[tuple[str, str]], source: Path | None = None
+) -> tuple[LinePlan, ...]:
+    base = Path.cwd() if source is None else source.parent  # where profile files are found
     lines: list[LinePlan] = []
     drive_names: dict[str, str] = {}
     bus_names: dict[str, str] = {}
@@ -362,6 +368,7 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                     watchdog=watchdog_plan(
                         bus.protocol, drive.watchdog, drive.control, at, problems
                     ),
+                    profile=drive_profile(bus.protocol, drive.profile, base, at, problems),
                 )
             )
         problems.extend(_foreign_keys(bus, where))

@@ -150,6 +150,11 @@ class ProtocolSpec(Generic[OptionsT]):
     line_keys: tuple[LineKey, ...] = ()
     # A codec for a line with these options; per address, what 100 % reference means in Hz.
     new_codec: Callable[[OptionsT, Mapping[int, float]], DriveCodec]
+    # Where each drive follows a profile of its own (modbus-rtu): a codec also given each
+    # address's profile (a DrivePlan's ``profile``); None: ``new_codec`` serves every line.
+    new_profiled_codec: (
+        Callable[[OptionsT, Mapping[int, float], Mapping[int, object]], DriveCodec] | None
+    ) = None
     factory: SerialSettings
     baudrates: tuple[int, ...]  # the rates the drives offer, fastest first
     parities: tuple[str, ...]  # the parities the drives offer, the factory one first
@@ -199,9 +204,19 @@ class ProtocolSpec(Generic[OptionsT]):
         return self.options(**given)
 
     def codec(
-        self, source: object = None, nominal_hz: Mapping[int, float] | None = None
+        self,
+        source: object = None,
+        nominal_hz: Mapping[int, float] | None = None,
+        profiles: Mapping[int, object] | None = None,
     ) -> DriveCodec:
-        """A codec for a line whose options ``source`` carries (see :meth:`options_of`)."""
+        """A codec for a line whose options ``source`` carries (see :meth:`options_of`).
+
+        ``profiles``: each address's drive profile, for a protocol that has them.
+        """
+        if self.new_profiled_codec is not None:
+            return self.new_profiled_codec(
+                self.options_of(source), nominal_hz or {}, profiles or {}
+            )
         return self.new_codec(self.options_of(source), nominal_hz or {})
 
     def addresses(self, source: object = None) -> range:

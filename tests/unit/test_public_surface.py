@@ -80,6 +80,9 @@ FACES: dict[str, set[str]] = {
         "ALARM_BITS", "FcControl", "FcSimDrive", "ParameterStore", "Refused", "SETTINGS",
         "TRIP_LOCK_ALARMS", "WARNING_BITS",
     },
+    "fcmaster.sim.modbus_rtu": {
+        "Machine", "ModbusSimDrive", "State", "profile_for",
+    },
     "fcmaster.sim.enc": {
         "COMMUNICATION_FAULT", "EncControl", "EncRequestFramer", "EncSimDrive", "JOG_HZ",
         "ParameterStore", "READINGS", "Refused", "SETTINGS", "SOFTWARE_VERSION", "state_word",
