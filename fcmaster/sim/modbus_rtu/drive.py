@@ -35,7 +35,7 @@ from fcmaster.protocol.modbus_rtu.frame import (
     encode_response,
 )
 from fcmaster.protocol.modbus_rtu.keys import key_register, parse_register
-from fcmaster.protocol.modbus_rtu.profile import DriveProfile, Register
+from fcmaster.protocol.modbus_rtu.profile import DriveProfile, Register, StateMachine
 from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
 from fcmaster.sim.modbus_rtu.machine import Machine, State
 from fcmaster.sim.motor import Mode, Motor, MotorCommand
@@ -236,8 +236,10 @@ class ModbusSimDrive:
             "reverse": self.motor.frequency_hz < 0 or (machine.running and machine.reverse),
         }
         word = machine.status_bits()
+        # A state machine's own bits (0-6) say ready, running and fault by its states.
+        owned = 0 if profile.state_machine is StateMachine.BITS else 0x7F
         for name, bit in profile.status_bits.items():
-            if named.get(name):
+            if named.get(name) and not owned >> bit & 1:
                 word |= 1 << bit
         return word
 
