@@ -186,6 +186,9 @@ class ProtocolSpec(Generic[OptionsT]):
     # The watchdog facts of a line with these options where they depend on them (Mitsubishi:
     # the port the drives are wired to); None: ``watchdog`` on every line.
     watchdog_for: Callable[[OptionsT], WatchdogFacts] | None = None
+    # The watchdog facts of a drive with this profile (a DrivePlan's ``profile``) where its
+    # protocol's drives each follow one (modbus-rtu); None: the line's.
+    watchdog_of_profile: Callable[[object], WatchdogFacts | None] | None = None
 
     def options_of(self, source: object = None) -> OptionsT:
         """This protocol's options as ``source`` has them.
@@ -268,6 +271,14 @@ class ProtocolSpec(Generic[OptionsT]):
         if self.watchdog_for is None:
             return self.watchdog
         return self.watchdog_for(self.options_of(source))
+
+    def drive_watchdog(self, source: object, profile: object) -> WatchdogFacts:
+        """The watchdog facts of a drive with ``profile`` on a line with ``source``'s options."""
+        if self.watchdog_of_profile is not None:
+            facts = self.watchdog_of_profile(profile)
+            if facts is not None:
+                return facts
+        return self.watchdog_of(source)
 
     def owns_key(self, name: str) -> bool:
         """Whether ``name`` is one of this protocol's own line keys."""

@@ -15,7 +15,7 @@ from fcmaster.protocol.codec import DriveCodec
 from fcmaster.protocol.modbus_rtu.codec import ModbusCodec
 from fcmaster.protocol.modbus_rtu.describe import describe_frame
 from fcmaster.protocol.modbus_rtu.profile import DriveProfile
-from fcmaster.protocol.modbus_rtu.watchdog import WATCHDOG
+from fcmaster.protocol.modbus_rtu.watchdog import WATCHDOG, profile_facts
 from fcmaster.protocol.spec import (
     DiagnosisParameters,
     ParameterTables,
@@ -92,4 +92,5 @@ SPEC: Final[ProtocolSpec[ModbusOptions]] = ProtocolSpec(
     link_type=150,  # pcapng USER3
     simulator="fcmaster.sim.modbus_rtu.simulator:SIMULATOR",
     watchdog=WATCHDOG,
+    watchdog_of_profile=profile_facts,
 )

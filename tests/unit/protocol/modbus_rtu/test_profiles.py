@@ -18,6 +18,7 @@ from fcmaster.protocol.modbus_rtu.profile import (
 )
 from fcmaster.protocol.modbus_rtu.profile_file import parse_profile_text
 from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
+from fcmaster.protocol.registry import spec_for
 
 DESIGN_NAMES = [
     "abb-drives",
@@ -214,3 +215,24 @@ def test_missing_and_mistyped_keys() -> None:
 def test_not_yaml_and_not_a_mapping() -> None:
     assert any("not valid YAML" in r for r in problems_of("name: [").values())
     assert "mapping" in problems_of("- 1\n")["my.yaml: (top)"]
+
+
+# ---------------------------------------------------------------- the audit's facts
+
+
+def test_each_drives_watchdog_facts_come_from_its_profile() -> None:
+    spec = spec_for("modbus-rtu")
+    abb = spec.drive_watchdog(None, BUILT_IN["abb-drives"])
+    assert abb.parameters == ("hr5815", "hr5813")
+    assert abb.encode(3.0, "fault") == (("hr5815", 3.0), ("hr5813", 1))
+    assert abb.decode([3.0, 4]).action == "fault always"
+    assert "hr5815" in abb.advice(2.0)
+    yaskawa = spec.drive_watchdog(None, BUILT_IN["yaskawa-memobus"])
+    assert yaskawa.encode(2.0, "ramp to stop") == (("hr1077", 2.0), ("hr1064", 0), ("hr1065", 1))
+    v20 = spec.drive_watchdog(None, BUILT_IN["sinamics-v20"])
+    assert v20.actions == ("fault F72",)
+    assert v20.timeout_range_s == (0.1, 65.535)
+    with pytest.raises(UsageError):
+        abb.encode(3.0, "warning")  # an action that lets the motor run is never written
+    # A drive without a profile has the line's facts, which read nothing.
+    assert spec.drive_watchdog(None, None).parameters == ()

@@ -1,0 +1,100 @@
+"""`fcmaster run` against `fcmaster sim` on a pty: one Modbus RTU line, a drive per profile.
+
+The daemon reads each drive's communication watchdog from the registers its profile names
+and judges it (the verdicts reach the HTTP API), and a drive of each family is started and
+stopped through the HTTP API, each confirmed by its status word.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+from tests.integration.daemon_harness import by_name, child, get_json, until
+from tests.integration.ports import free_port
+
+OPERATOR = "operator-token-0123456789abcdef"
+CONFIG = """
+buses:
+  - name: mb
+    port: {port}
+    protocol: modbus-rtu
+    baudrate: 19200
+    parity: E
+    drives:
+      - {{name: abb, address: 1, control: bus, profile: abb-drives}}
+      - {{name: v20, address: 2, control: bus, profile: sinamics-v20}}
+      - {{name: atv, address: 3, control: bus, profile: altivar-cia402}}
+      - {{name: yaskawa, address: 4, control: bus, profile: yaskawa-memobus}}
+      - {{name: danfoss, address: 5, control: bus, profile: danfoss-fc-modbus}}
+    simulation:
+      drives:
+        1: {{parameters: {{hr5815: 30, hr5813: 1}}}}
+        3: {{parameters: {{hr6005: 20, hr7002: 2}}}}
+        4: {{parameters: {{hr1077: 20, hr1064: 1, hr1065: 1}}}}
+        5: {{parameters: {{hr8029x2: 30, hr8039x2: 2}}}}
+http:
+  listen: 127.0.0.1:{http}
+  anonymous: viewer
+  tokens:
+    - {{name: ops, role: operator, token: {operator}}}
+on_shutdown: hold
+logging: {{level: info, format: json}}
+"""
+NAMES = ("abb", "v20", "atv", "yaskawa", "danfoss")
+
+
+async def _verdicts(client: httpx.AsyncClient) -> dict[str, dict[str, Any]] | None:
+    drives = by_name(await get_json(client, "/api/v1/drives"))
+    audited = {n: d["watchdog"] for n, d in drives.items() if "watchdog" in d}
+    return audited if len(audited) == len(NAMES) else None
+
+
+async def _drive(client: httpx.AsyncClient, name: str) -> dict[str, Any]:
+    found: dict[str, Any] = await get_json(client, f"/api/v1/drives/{name}")
+    return found
+
+
+async def test_watchdog_verdicts_and_commands_of_every_profile(tmp_path: Path) -> None:
+    port, http = tmp_path / "ttyMB", free_port()
+    config = tmp_path / "plant.yaml"
+    config.write_text(CONFIG.format(port=port, http=http, operator=OPERATOR))
+    auth = {"Authorization": f"Bearer {OPERATOR}"}
+    async with child("sim", "--config", str(config), log=tmp_path / "sim.log") as sim:
+        assert (await sim.readline()).split()[0] == "mb"
+        async with (
+            child("run", "--config", str(config), log=tmp_path / "run.log") as daemon,
+            httpx.AsyncClient(base_url=f"http://127.0.0.1:{http}", timeout=15) as client,
+        ):
+            verdicts = await until(lambda: _verdicts(client), "five verdicts", alive=daemon)
+            assert verdicts == {
+                "abb": {"timeout_s": 3.0, "action": "fault", "verdict": "ok"},
+                "v20": {"timeout_s": None, "action": "off", "verdict": "off"},  # P2014 = 0
+                "atv": {"timeout_s": 2.0, "action": "ramp stop", "verdict": "ok"},
+                "yaskawa": {"timeout_s": 2.0, "action": "coast to stop", "verdict": "ok"},
+                "danfoss": {"timeout_s": 3.0, "action": "stop", "verdict": "ok"},
+            }
+            for name in NAMES:
+                started = await client.post(
+                    f"/api/v1/drives/{name}/commands",
+                    json={"action": "start", "frequency_hz": 20},
+                    headers=auth,
+                )
+                assert started.json()["outcome"] == "done", (name, started.text)
+
+            async def at_speed() -> bool | None:
+                states = [await _drive(client, n) for n in NAMES]
+                fast = [abs((s["output_frequency_hz"] or 0) - 20) < 0.05 for s in states]
+                return (all(s["running"] for s in states) and all(fast)) or None
+
+            await until(at_speed, "every drive at 20 Hz", alive=daemon)
+            for name in NAMES:
+                stopped = await client.post(
+                    f"/api/v1/drives/{name}/commands", json={"action": "stop"}, headers=auth
+                )
+                assert stopped.json()["outcome"] == "done", (name, stopped.text)
+            state = await _drive(client, "atv")
+            assert state["protocol"] == "modbus-rtu"
+            assert state["running"] is False
