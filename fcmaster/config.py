@@ -368,7 +368,14 @@ def _check(
                     watchdog=watchdog_plan(
                         bus.protocol, drive.watchdog, drive.control, at, problems
                     ),
-                    profile=drive_profile(bus.protocol, drive.profile, base, at, problems),
+                    profile=drive_profile(
+                        bus.protocol,
+                        drive.profile,
+                        base,
+                        at,
+                        problems,
+                        getattr(bus, "profile", None),
+                    ),
                 )
             )
         problems.extend(_foreign_keys(bus, where))

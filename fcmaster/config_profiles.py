@@ -20,20 +20,24 @@ def drive_profile(
     base: Path,
     at: str,
     problems: list[tuple[str, str]],
+    line_default: str | None = None,
 ) -> object:
-    """The profile ``profile`` names for a drive at key path ``at`` (None: a problem noted)."""
+    """The profile ``profile`` names for a drive at key path ``at``.
+
+    None: the line's ``profile`` (``line_default``) serves the drive, or a problem is noted.
+    """
     from fcmaster.protocol.modbus_rtu.profile_file import parse_profile_text
     from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
 
     where = f"{at}.profile"
     takes = spec_for(protocol).new_profiled_codec is not None
     if profile is None:
-        if takes:
+        if takes and line_default is None:
             problems.append(
                 (
                     where,
                     f"a {protocol} drive needs a profile: one of {', '.join(BUILT_IN)}, "
-                    "or the path of a profile file",
+                    "or the path of a profile file (or the line's profile: for all of them)",
                 )
             )
         return None

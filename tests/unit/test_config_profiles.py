@@ -78,3 +78,16 @@ def test_a_missing_profile_file_is_named(tmp_path: Path) -> None:
 def test_a_modbus_address_beyond_247_is_refused() -> None:
     found = problems(config("modbus-rtu", "abb-drives", address=248))
     assert "248" in found["buses[0].drives[0].address"]
+
+
+def test_the_lines_profile_serves_its_drives_without_one() -> None:
+    text = config("modbus-rtu", None).replace(
+        "protocol: modbus-rtu", "protocol: modbus-rtu\n    profile: yaskawa-memobus"
+    )
+    (line,) = parse(text).lines
+    assert line.drives[0].profile is None
+    assert dict(line.protocol_options)["profile"] == "yaskawa-memobus"
+    found = problems(
+        config("danfoss-fc", None).replace("protocol: danfoss-fc", "profile: abb-drives")
+    )
+    assert "only modbus-rtu lines have one" in found["buses[0].profile"]

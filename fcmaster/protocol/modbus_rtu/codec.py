@@ -86,18 +86,32 @@ class ModbusCodec:
         self,
         profiles: Mapping[int, DriveProfile] | None = None,
         nominal_hz: Mapping[int, float] | None = None,
+        default: DriveProfile | None = None,
     ) -> None:
+        """Drives follow ``profiles`` by address, else ``default`` (the line's ``profile``).
+
+        A drive with neither is polled only for its presence (holding register 0: any
+        answer, an exception too, says it is there) and commanded not at all; its registers
+        can still be read and written, unscaled.
+        """
         self.profiles = dict(profiles or {})
         self.nominal_hz = dict(nominal_hz or {})
+        self.default = default
         self._commanded: dict[int, ControlIntent] = {}
         self._polls = PollCache(self._build_poll)
 
     def profile(self, address: int) -> DriveProfile:
         """The profile of the drive at ``address``; UsageError if it has none."""
-        profile = self.profiles.get(address)
+        profile = self._known(address)
         if profile is None:
-            raise UsageError(f"the Modbus drive at address {address} has no profile")
+            raise UsageError(
+                f"the Modbus drive at address {address} has no profile: give it one "
+                "(profile: in the config, --profile on the command line)"
+            )
         return profile
+
+    def _known(self, address: int) -> DriveProfile | None:
+        return self.profiles.get(address, self.default)
 
     def new_framer(self) -> RtuFramer:
         """A framer for the drives' answers."""
@@ -145,7 +159,11 @@ class ModbusCodec:
     def _build_poll(
         self, address: int, intent: ControlIntent | None, read: ParameterKey | None
     ) -> Exchange:
-        profile = self.profile(address)
+        profile = self._known(address)
+        if profile is None:  # presence only (see __init__)
+            if read is not None and read not in PROFILE_KEYS:
+                return self._read(address, key_register(read), read)
+            return self._read(address, Register(address=0), None)
         if read is CONTROL_FEED and intent is not None:
             word = self._words(profile, intent)[-1]
             return self._write(address, profile.control, (word,), carries_control=True)
@@ -258,7 +276,7 @@ class ModbusCodec:
         _no_index(index)
         if isinstance(value, str):
             raise UsageError(f"{parameter.name}: only numbers can be written to a register")
-        register = self._scaled(self.profile(address), key_register(parameter))
+        register = self._scaled(self._known(address), key_register(parameter))
         return (self._write(address, register, register.raw(value), parameter=parameter),)
 
     # ------------------------------------------------------------------ replies
@@ -294,7 +312,12 @@ class ModbusCodec:
     def _read_reply(
         self, exchange: Exchange, request: ReadRequest, values: tuple[int, ...]
     ) -> Reply:
-        profile = self.profile(exchange.address)
+        profile = self._known(exchange.address)
+        if profile is None:
+            value = None
+            if exchange.parameter is not None and exchange.parameter not in PROFILE_KEYS:
+                value = self._value(exchange, values)
+            return Reply(address=exchange.address, value=value)
         words = dict(enumerate(values, request.start))
         table_input = request.function is Function.READ_INPUT
 
@@ -347,9 +370,10 @@ class ModbusCodec:
     def _value(self, exchange: Exchange, words: tuple[int, ...]) -> ParameterValue:
         key = exchange.parameter
         assert key is not None
-        profile = self.profile(exchange.address)
+        profile = self._known(exchange.address)
         register = self._scaled(profile, key_register(key))
-        title = next((v.name for v in profile.values if same_register(v.register, register)), "")
+        listed = profile.values if profile is not None else ()
+        title = next((v.name for v in listed if same_register(v.register, register)), "")
         raw = 0
         for word in words:
             raw = raw << 16 | word
@@ -363,8 +387,10 @@ class ModbusCodec:
         )
 
     @staticmethod
-    def _scaled(profile: DriveProfile, register: Register) -> Register:
+    def _scaled(profile: DriveProfile | None, register: Register) -> Register:
         """``register`` with the scaling the profile gives it, if the profile lists it."""
+        if profile is None:
+            return register
         listed = [v.register for v in profile.values]
         listed += [r for r in profile.watchdog.registers]
         listed += [profile.reference, profile.output_frequency]

@@ -15,9 +15,11 @@ from fcmaster.protocol.codec import DriveCodec
 from fcmaster.protocol.modbus_rtu.codec import ModbusCodec
 from fcmaster.protocol.modbus_rtu.describe import describe_frame
 from fcmaster.protocol.modbus_rtu.profile import DriveProfile
+from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
 from fcmaster.protocol.modbus_rtu.watchdog import WATCHDOG, profile_facts
 from fcmaster.protocol.spec import (
     DiagnosisParameters,
+    LineKey,
     ParameterTables,
     ProtocolSpec,
     SerialSettings,
@@ -26,7 +28,9 @@ from fcmaster.protocol.spec import (
 
 @dataclass(slots=True, frozen=True)
 class ModbusOptions:
-    """Modbus RTU lines have no line keys of their own: a drive's profile says the rest."""
+    """The profile of a line's drives that name none of their own (None: each names one)."""
+
+    profile: str | None = None
 
 
 class StatusBit(enum.IntFlag):
@@ -51,20 +55,31 @@ class StatusBit(enum.IntFlag):
 
 
 def _codec(options: ModbusOptions, nominal_hz: Mapping[int, float]) -> DriveCodec:
-    return ModbusCodec({}, nominal_hz)
+    return _profiled(options, nominal_hz, {})
 
 
 def _profiled(
     options: ModbusOptions, nominal_hz: Mapping[int, float], profiles: Mapping[int, object]
 ) -> DriveCodec:
     chosen = {a: p for a, p in profiles.items() if isinstance(p, DriveProfile)}
-    return ModbusCodec(chosen, nominal_hz)
+    default = None if options.profile is None else BUILT_IN[options.profile]
+    return ModbusCodec(chosen, nominal_hz, default)
 
 
 SPEC: Final[ProtocolSpec[ModbusOptions]] = ProtocolSpec(
     name="modbus-rtu",
     manufacturer="Modbus RTU drive",
     options=ModbusOptions,
+    line_keys=(
+        LineKey(
+            name="profile",
+            default=None,
+            choices=tuple(BUILT_IN),
+            nullable=True,
+            help="the built-in drive profile of the line's drives that name none of their own",
+            simulated=True,
+        ),
+    ),
     new_codec=_codec,
     new_profiled_codec=_profiled,
     # Serial Line V1.02 §2.5.1: even parity is the default; 19200 and 9600 must be offered.

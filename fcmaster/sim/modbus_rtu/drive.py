@@ -8,9 +8,10 @@ other register is answered with exception 02 (illegal data address), a write to 
 that is only read with 02 too, a request with a bad CRC not at all (Serial Line §2.5.1.2),
 a broadcast (address 0) obeyed and not answered.
 
-Which profile: ``DriveSettings.profile`` (a built-in's name or a profile), else the
-built-ins in turn by address (1 ABB Drives, 2 SINAMICS V20, 3 Altivar, 4 Yaskawa, 5 Danfoss,
-6 ABB again, …), so ``fcmaster sim --protocol modbus-rtu --addresses 1-5`` has one of each.
+Which profile: ``DriveSettings.profile`` (a built-in's name or a profile), else the line's
+``profile`` (``fcmaster sim --profile``), else the built-ins in turn by address (1 ABB
+Drives, 2 SINAMICS V20, 3 Altivar, 4 Yaskawa, 5 Danfoss, 6 ABB again, …), so ``fcmaster
+sim --protocol modbus-rtu --addresses 1-5`` has one of each.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from fcmaster.protocol.modbus_rtu.frame import (
 from fcmaster.protocol.modbus_rtu.keys import key_register, parse_register
 from fcmaster.protocol.modbus_rtu.profile import DriveProfile, Register, StateMachine
 from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
+from fcmaster.protocol.modbus_rtu.spec import SPEC
 from fcmaster.sim.modbus_rtu.machine import Machine, State
 from fcmaster.sim.motor import Mode, Motor, MotorCommand
 from fcmaster.sim.settings import DriveSettings, LineSettings
@@ -53,9 +55,13 @@ class Refused(FcmasterError):
         super().__init__(code.name)
 
 
-def profile_for(address: int, settings: DriveSettings) -> DriveProfile:
-    """The profile a simulated drive at ``address`` follows."""
+def profile_for(
+    address: int, settings: DriveSettings, line: LineSettings | None = None
+) -> DriveProfile:
+    """The profile a simulated drive at ``address`` follows (the line's ``profile`` next)."""
     chosen = settings.profile
+    if chosen is None and line is not None:
+        chosen = SPEC.options_of(line).profile
     if isinstance(chosen, DriveProfile):
         return chosen
     if chosen is None:
@@ -79,7 +85,7 @@ class ModbusSimDrive:
         """A drive powered up at ``now`` at ``address``, following its profile."""
         settings = settings or DriveSettings()
         self._address = address
-        self.profile = profile_for(address, settings)
+        self.profile = profile_for(address, settings, line)
         self.settings = settings
         self.machine = Machine(self.profile)
         self.motor: Motor = settings.motor(settings.started_at(now))

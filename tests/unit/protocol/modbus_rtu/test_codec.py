@@ -21,6 +21,7 @@ from fcmaster.protocol.modbus_rtu.codec import ModbusCodec
 from fcmaster.protocol.modbus_rtu.keys import CONTROL_FEED, FAULT_CODE, OUTPUT_FREQUENCY
 from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
 from fcmaster.protocol.registry import spec_for
+from fcmaster.subcommands.commission import LineOptions
 
 ABB, V20, ATV, YASKAWA, DANFOSS = 1, 2, 3, 4, 5
 CODEC = ModbusCodec(
@@ -180,9 +181,9 @@ def test_a_command_the_profile_lacks_is_refused() -> None:
         CODEC.control(YASKAWA, ControlIntent(Motion.COAST))
 
 
-def test_a_drive_without_a_profile_is_refused() -> None:
+def test_a_drive_without_a_profile_is_not_commanded() -> None:
     with pytest.raises(UsageError, match="no profile"):
-        CODEC.poll(9, None, None)
+        CODEC.control(9, STOP)
 
 
 # ---------------------------------------------------------------- answers
@@ -230,3 +231,24 @@ def test_the_spec_gives_the_modbus_factory_settings_and_the_t35_pause() -> None:
     assert CODEC.min_pause_s(11 / 19200) == pytest.approx(3.5 * 11 / 19200)
     assert CODEC.min_pause_s(11 / 115200) == pytest.approx(0.00175)
     assert spec.codec(None, {}, {ABB: BUILT_IN["abb-drives"]}).protocol == "modbus-rtu"
+
+
+def test_a_drive_without_a_profile_is_only_looked_for() -> None:
+    codec = spec_for("modbus-rtu").codec()  # no profiles, no line profile (a scan)
+    poll = codec.poll(12, None, None)
+    assert decode_request(poll.request) == ReadRequest(
+        address=12, function=Function.READ_HOLDING, start=0, count=1
+    )
+    refused = encode_response(ExceptionReply(address=12, function=3, code=2))
+    assert codec.parse(poll, refused).error is not None  # an answer all the same: it is there
+    with pytest.raises(UsageError, match="--profile"):
+        codec.control(12, STOP)
+
+
+def test_the_lines_profile_serves_drives_without_their_own() -> None:
+    codec = spec_for("modbus-rtu").codec(
+        LineOptions(
+            port="p", protocol="modbus-rtu", protocol_options=(("profile", "abb-drives"),)
+        ).plan()
+    )
+    assert writes(codec.control(3, STOP)) == [(0, 0x047E)]
