@@ -354,6 +354,10 @@ def _check(
                         f"{drive.min_frequency_hz} is above the maximum {max_hz}",
                     )
                 )
+            line_profile = getattr(bus, "profile", None)  # modbus-rtu: the line's own
+            profile = drive_profile(bus.protocol, drive.profile, base, at, problems, line_profile)
+            if profile is None and line_profile is not None:  # the line's serves the drive
+                profile = drive_profile(bus.protocol, line_profile, base, at, [])
             drives.append(
                 DrivePlan(
                     name=drive.name,
@@ -366,16 +370,9 @@ def _check(
                     max_frequency_hz=max_hz,
                     confirm_s=drive.confirm_s,
                     watchdog=watchdog_plan(
-                        bus.protocol, drive.watchdog, drive.control, at, problems
+                        bus.protocol, drive.watchdog, drive.control, at, problems, profile
                     ),
-                    profile=drive_profile(
-                        bus.protocol,
-                        drive.profile,
-                        base,
-                        at,
-                        problems,
-                        getattr(bus, "profile", None),
-                    ),
+                    profile=profile,
                 )
             )
         problems.extend(_foreign_keys(bus, where))

@@ -1,7 +1,8 @@
 """`fcmaster run` against `fcmaster sim` on a pty: one Modbus RTU line, a drive per profile.
 
 The daemon reads each drive's communication watchdog from the registers its profile names
-and judges it (the verdicts reach the HTTP API), and a drive of each family is started and
+and judges it (the verdicts reach the HTTP API; one is written first, as its config asks),
+and a drive of each family is started and
 stopped through the HTTP API, each confirmed by its status word.
 """
 
@@ -24,14 +25,14 @@ buses:
     baudrate: 19200
     parity: E
     drives:
-      - {{name: abb, address: 1, control: bus, profile: abb-drives}}
+      - {{name: abb, address: 1, control: bus, profile: abb-drives,
+          watchdog: {{timeout_s: 2.5, action: fault}}}}
       - {{name: v20, address: 2, control: bus, profile: sinamics-v20}}
       - {{name: atv, address: 3, control: bus, profile: altivar-cia402}}
       - {{name: yaskawa, address: 4, control: bus, profile: yaskawa-memobus}}
       - {{name: danfoss, address: 5, control: bus, profile: danfoss-fc-modbus}}
     simulation:
       drives:
-        1: {{parameters: {{hr5815: 30, hr5813: 1}}}}
         3: {{parameters: {{hr6005: 20, hr7002: 2}}}}
         4: {{parameters: {{hr1077: 20, hr1064: 1, hr1065: 1}}}}
         5: {{parameters: {{hr8029x2: 30, hr8039x2: 2}}}}
@@ -70,7 +71,8 @@ async def test_watchdog_verdicts_and_commands_of_every_profile(tmp_path: Path) -
         ):
             verdicts = await until(lambda: _verdicts(client), "five verdicts", alive=daemon)
             assert verdicts == {
-                "abb": {"timeout_s": 3.0, "action": "fault", "verdict": "ok"},
+                # written at adoption over the simulated factory setting (58.14 = no action)
+                "abb": {"timeout_s": 2.5, "action": "fault", "verdict": "ok"},
                 "v20": {"timeout_s": None, "action": "off", "verdict": "off"},  # P2014 = 0
                 "atv": {"timeout_s": 2.0, "action": "ramp stop", "verdict": "ok"},
                 "yaskawa": {"timeout_s": 2.0, "action": "coast to stop", "verdict": "ok"},

@@ -85,9 +85,22 @@ def test_the_lines_profile_serves_its_drives_without_one() -> None:
         "protocol: modbus-rtu", "protocol: modbus-rtu\n    profile: yaskawa-memobus"
     )
     (line,) = parse(text).lines
-    assert line.drives[0].profile is None
+    assert line.drives[0].profile is BUILT_IN["yaskawa-memobus"]
     assert dict(line.protocol_options)["profile"] == "yaskawa-memobus"
     found = problems(
         config("danfoss-fc", None).replace("protocol: danfoss-fc", "profile: abb-drives")
     )
     assert "only modbus-rtu lines have one" in found["buses[0].profile"]
+
+
+def test_a_modbus_drives_watchdog_is_checked_against_its_profiles_actions() -> None:
+    text = config("modbus-rtu", "abb-drives").replace(
+        "address: 1",
+        "address: 1\n        control: bus\n        watchdog: {timeout_s: 2.0, action: fault}",
+    )
+    (line,) = parse(text).lines
+    watchdog = line.drives[0].watchdog
+    assert watchdog is not None
+    assert (watchdog.timeout_s, watchdog.action) == (2.0, "fault")
+    found = problems(text.replace("action: fault", "action: warning"))
+    assert "fault, fault always" in found["buses[0].drives[0].watchdog.action"]
