@@ -137,7 +137,11 @@ class WatchdogProfile:
 
 @dataclass(slots=True, frozen=True, kw_only=True)
 class Pacing:
-    """Waits a family asks for beyond the 3.5-character silence."""
+    """Waits a family asks for beyond the 3.5-character silence.
+
+    Recorded from the manuals; the bus does not apply them yet (a line's ``pause_s`` can
+    stand in for ``between_steps_s`` meanwhile).
+    """
 
     after_write_s: float = 0.0  # after a parameter write, before the next request
     between_steps_s: float = 0.0  # between the steps of a command sequence
