@@ -43,7 +43,7 @@ from fcmaster.adapters.settings import HttpSettings, ModbusSettings, MqttSetting
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.config_modbus import check_modbus, modbus_units
-from fcmaster.config_profiles import drive_profile
+from fcmaster.config_profiles import drive_profile, profile_monitor
 from fcmaster.config_sections import (
     HttpModel,
     LoggingModel,
@@ -364,7 +364,9 @@ def _check(
                     address=drive.address,
                     control=drive.control == "bus",
                     on_start=OnStart(drive.on_start),
-                    monitor=None if drive.monitor is None else tuple(drive.monitor),
+                    monitor=profile_monitor(profile)
+                    if drive.monitor is None
+                    else tuple(drive.monitor),
                     nominal_frequency_hz=drive.nominal_frequency_hz,
                     min_frequency_hz=drive.min_frequency_hz,
                     max_frequency_hz=max_hz,

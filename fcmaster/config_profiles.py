@@ -64,3 +64,16 @@ def drive_profile(
     except ConfigError as exc:
         problems.extend((where, f"{inner}: {reason}") for inner, reason in exc.problems)
         return None
+
+
+def profile_monitor(profile: object) -> tuple[str, ...] | None:
+    """What a drive without ``monitor:`` watches: its profile's values (None: no profile).
+
+    Each drive its own: the codec's default monitor is every profile's on the line.
+    """
+    from fcmaster.protocol.modbus_rtu.keys import register_key
+    from fcmaster.protocol.modbus_rtu.profile import DriveProfile
+
+    if not isinstance(profile, DriveProfile):
+        return None
+    return tuple(register_key(value.register).name for value in profile.values)

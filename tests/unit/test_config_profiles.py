@@ -104,3 +104,13 @@ def test_a_modbus_drives_watchdog_is_checked_against_its_profiles_actions() -> N
     assert (watchdog.timeout_s, watchdog.action) == (2.0, "fault")
     found = problems(text.replace("action: fault", "action: warning"))
     assert "fault, fault always" in found["buses[0].drives[0].watchdog.action"]
+
+
+def test_a_drive_without_a_monitor_list_watches_its_own_profiles_values() -> None:
+    text = config("modbus-rtu", "altivar-cia402").replace(
+        "    drives:\n", "    drives:\n      - {name: d0, address: 2, profile: abb-drives}\n"
+    )
+    (line,) = parse(text).lines
+    by_name = {d.name: d for d in line.drives}
+    assert by_name["d1"].monitor == ("hr3204", "hr3207", "hr3209")
+    assert by_name["d0"].monitor == ("hr106", "hr109", "hr110")
