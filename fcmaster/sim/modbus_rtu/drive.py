@@ -45,6 +45,9 @@ from fcmaster.sim.settings import DriveSettings, LineSettings
 
 FACTORY_DELAY_S: Final = 0.002
 ORDER: Final = tuple(BUILT_IN)  # the built-ins in turn, by address
+# Words in a fault text that name a lost link (EFB communication loss, CE MEMOBUS/Modbus
+# communication error, control word timeout, USS/Modbus setpoint fault)
+_LINK_WORDS: Final = ("communication", "control word timeout", "setpoint fault")
 
 
 class Refused(FcmasterError):
@@ -108,6 +111,7 @@ class ModbusSimDrive:
             for offset, word in enumerate(register.raw(value)):
                 self.stored[(register.input, register.address + offset)] = word
         self._control_word = 0
+        self._heard_at: float | None = None
         self._reference_words: tuple[int, ...] = (0,) * self.profile.reference.words
         if settings.running_hz:
             self._adopt_running(settings.running_hz, now)
@@ -138,6 +142,7 @@ class ModbusSimDrive:
         broadcast = request.address == BROADCAST
         if broadcast and isinstance(request, ReadRequest):
             return None
+        self._watch(now)
         try:
             response = self._serve(request, now)
         except Refused as refusal:
@@ -261,6 +266,38 @@ class ModbusSimDrive:
         """The fault's cause is gone: a reset now clears it."""
         self.machine.clear()
         self._follow(now)
+
+    def _watch(self, now: float) -> None:
+        """The drive's own watchdog, as its registers set it: trip if the master fell silent.
+
+        Judged when the drive next hears the master (lazily, as the motor runs); the fault's
+        cause is gone at once, since the master is heard again, so a reset clears it.
+        """
+        heard, self._heard_at = self._heard_at, now
+        watchdog = self.profile.watchdog
+        if heard is None or not watchdog.registers or self.machine.state is State.FAULT:
+            return
+        values = [register.value(self._stored_words(register)) for register in watchdog.registers]
+        setting = watchdog.setting(values)
+        if setting.timeout_s is None or not setting.stops or now - heard <= setting.timeout_s:
+            return
+        self.motor.advance(heard + setting.timeout_s)
+        self.machine.trip(self._communication_fault())
+        self.machine.clear()
+        self._follow(heard + setting.timeout_s)
+
+    def _stored_words(self, register: Register) -> tuple[int, ...]:
+        return tuple(
+            self.stored.get((register.input, register.address + i), 0)
+            for i in range(register.words)
+        )
+
+    def _communication_fault(self) -> int:
+        """The profile's fault (or fault bit) for a lost link: the first whose text says so."""
+        for code, text in self.profile.faults.items():
+            if any(word in text.lower() for word in _LINK_WORDS):
+                return code
+        return 1
 
     def _fault_value(self) -> float:
         code = self.machine.fault

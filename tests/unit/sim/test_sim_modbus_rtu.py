@@ -118,3 +118,26 @@ def test_a_broadcast_write_is_obeyed_and_not_answered() -> None:
 def test_without_a_named_profile_the_built_ins_take_turns_by_address() -> None:
     names = [ModbusSimDrive(a, now=0.0).profile.name for a in range(1, 7)]
     assert names == [*BUILT_IN, "abb-drives"]
+
+
+@pytest.mark.parametrize(
+    ("profile", "watchdog", "fault"),
+    [
+        ("abb-drives", {"hr5815": 10, "hr5813": 1}, 6681),
+        ("altivar-cia402", {"hr6005": 10, "hr7002": 1}, 5),
+        ("sinamics-v20", {"hr0": 1000}, 72),
+    ],
+)
+def test_the_drives_watchdog_trips_it_when_the_master_falls_silent(
+    profile: str, watchdog: dict[str, float], fault: int
+) -> None:
+    sim = ModbusSimDrive(1, DriveSettings(profile=profile, parameters=watchdog), now=0.0)
+    control = BUILT_IN[profile].control.address
+    for word in BUILT_IN[profile].commands["start"]:
+        write(sim, control, word, now=0.1)
+    write(sim, control, BUILT_IN[profile].commands["start"][-1], now=0.9)  # in time: fed
+    assert sim.machine.running
+    write(sim, control, BUILT_IN[profile].commands["start"][-1], now=2.5)  # 1.6 s of silence
+    assert state(sim) is State.FAULT
+    assert sim.machine.fault == fault
+    assert not sim.machine.running
