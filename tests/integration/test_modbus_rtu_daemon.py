@@ -8,12 +8,14 @@ stopped through the HTTP API, each confirmed by its status word.
 
 from __future__ import annotations
 
+import asyncio
+import json
 from pathlib import Path
 from typing import Any
 
 import httpx
 
-from tests.integration.daemon_harness import by_name, child, get_json, until
+from tests.integration.daemon_harness import START_S, by_name, child, get_json, until
 from tests.integration.ports import free_port
 
 OPERATOR = "operator-token-0123456789abcdef"
@@ -51,6 +53,16 @@ async def _verdicts(client: httpx.AsyncClient) -> dict[str, dict[str, Any]] | No
     drives = by_name(await get_json(client, "/api/v1/drives"))
     audited = {n: d["watchdog"] for n, d in drives.items() if "watchdog" in d}
     return audited if len(audited) == len(NAMES) else None
+
+
+async def _status(port: Path, profile: str, address: int, log: Path) -> dict[str, Any]:
+    args = ("status", "--port", str(port), "--protocol", "modbus-rtu", "--profile", profile)
+    async with child(*args, "--address", str(address), "--json", log=log) as status:
+        assert status.process.stdout is not None
+        out = await asyncio.wait_for(status.process.stdout.read(), START_S)
+        assert await status.process.wait() == 0, status.tail()
+    state: dict[str, Any] = json.loads(out)
+    return state
 
 
 async def _drive(client: httpx.AsyncClient, name: str) -> dict[str, Any]:
@@ -92,11 +104,26 @@ async def test_watchdog_verdicts_and_commands_of_every_profile(tmp_path: Path) -
                 return (all(s["running"] for s in states) and all(fast)) or None
 
             await until(at_speed, "every drive at 20 Hz", alive=daemon)
-            for name in NAMES:
-                stopped = await client.post(
-                    f"/api/v1/drives/{name}/commands", json={"action": "stop"}, headers=auth
-                )
-                assert stopped.json()["outcome"] == "done", (name, stopped.text)
+            stopped = await client.post(
+                "/api/v1/drives/atv/commands", json={"action": "stop"}, headers=auth
+            )
+            assert stopped.json()["outcome"] == "done", stopped.text
             state = await _drive(client, "atv")
             assert state["protocol"] == "modbus-rtu"
             assert state["running"] is False
+            code, _ = await daemon.stop()  # on_shutdown: hold
+            assert code == 0, daemon.tail()
+
+        # The gateway is gone. Past the watchdogs' time, the drives that have one tripped;
+        # the SINAMICS V20, whose watchdog is off (P2014 = 0), still turns.
+        await asyncio.sleep(3.0 + 0.5)
+        log = tmp_path / "status.log"
+        abb = await _status(port, "abb-drives", 1, log)
+        assert abb["fault"] is True
+        assert abb["running"] is False
+        v20 = await _status(port, "sinamics-v20", 2, log)
+        assert v20["running"] is True
+        assert abs(v20["output_frequency_hz"] - 20.0) < 0.05
+        yaskawa = await _status(port, "yaskawa-memobus", 4, log)
+        assert yaskawa["fault"] is True
+        assert (await sim.stop())[0] == 0
