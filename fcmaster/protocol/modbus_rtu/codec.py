@@ -23,13 +23,9 @@ from typing import Final
 from fcmaster.errors import MalformedReply, UnexpectedReply, UsageError
 from fcmaster.protocol.codec import (
     Access,
-    Condition,
-    ConditionReport,
     DriveError,
-    DriveStatus,
     Exchange,
     ParameterKey,
-    ParameterValue,
     Reply,
 )
 from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, Motion, pct_to_hz
@@ -60,6 +56,7 @@ from fcmaster.protocol.modbus_rtu.keys import (
     same_register,
 )
 from fcmaster.protocol.modbus_rtu.profile import DriveProfile, Register
+from fcmaster.protocol.modbus_rtu.replies import read_reply, scaled, value_of
 from fcmaster.protocol.polls import PollCache
 
 # Status and output frequency this close are read together (a few bytes more per poll
@@ -276,7 +273,7 @@ class ModbusCodec:
         _no_index(index)
         if isinstance(value, str):
             raise UsageError(f"{parameter.name}: only numbers can be written to a register")
-        register = self._scaled(self._known(address), key_register(parameter))
+        register = scaled(self._known(address), key_register(parameter))
         return (self._write(address, register, register.raw(value), parameter=parameter),)
 
     # ------------------------------------------------------------------ replies
@@ -300,101 +297,16 @@ class ModbusCodec:
                 raise MalformedReply(
                     f"{len(response.values)} registers for {request.count} asked", raw=frame
                 )
-            return self._read_reply(exchange, request, response.values)
+            nominal = self.nominal_hz.get(exchange.address, DEFAULT_NOMINAL_HZ)
+            profile = self._known(exchange.address)
+            return read_reply(exchange, request, response.values, profile, nominal)
         if response != _echo(request):
             raise UnexpectedReply("the write was not confirmed as sent", raw=frame)
         value = None
         if exchange.parameter is not None and exchange.parameter not in PROFILE_KEYS:
             words = request.values if isinstance(request, WriteMultiple) else (request.value,)
-            value = self._value(exchange, words)
+            value = value_of(self._known(exchange.address), exchange.parameter, words)
         return Reply(address=exchange.address, value=value)
-
-    def _read_reply(
-        self, exchange: Exchange, request: ReadRequest, values: tuple[int, ...]
-    ) -> Reply:
-        profile = self._known(exchange.address)
-        if profile is None:
-            value = None
-            if exchange.parameter is not None and exchange.parameter not in PROFILE_KEYS:
-                value = self._value(exchange, values)
-            return Reply(address=exchange.address, value=value)
-        words = dict(enumerate(values, request.start))
-        table_input = request.function is Function.READ_INPUT
-
-        def held(register: Register) -> tuple[int, ...] | None:
-            span = range(register.address, register.address + register.words)
-            if register.input != table_input or not all(a in words for a in span):
-                return None
-            return tuple(words[a] for a in span)
-
-        status = frequency = conditions = value = None
-        if (word := held(profile.status)) is not None and exchange.parameter is None:
-            status = self._status(profile, word[0])
-        freq_words = held(profile.output_frequency)
-        if freq_words is not None and exchange.parameter in (None, OUTPUT_FREQUENCY):
-            frequency = self._hz(exchange.address, profile.output_frequency, freq_words)
-        if exchange.parameter is FAULT_CODE and profile.fault_code is not None:
-            raw = held(profile.fault_code)
-            if raw is not None:
-                code = int(profile.fault_code.value(raw) / profile.fault_code.scale)
-                active = tuple(Condition(c, t) for c, t in profile.fault_texts(code))
-                conditions = ConditionReport(kind="alarm", source="fault_code", active=active)
-        elif exchange.parameter is not None and exchange.parameter not in PROFILE_KEYS:
-            value = self._value(exchange, values)
-        return Reply(
-            address=exchange.address,
-            status=status,
-            output_frequency_hz=frequency,
-            conditions=conditions,
-            value=value,
-        )
-
-    def _status(self, profile: DriveProfile, word: int) -> DriveStatus:
-        remote = profile.bit(word, "remote")
-        return DriveStatus(
-            word=word,
-            running=bool(profile.bit(word, "running")),
-            fault=bool(profile.bit(word, "fault")),
-            warning=bool(profile.bit(word, "warning")),
-            at_reference=bool(profile.bit(word, "at_reference")),
-            reverse=profile.bit(word, "reverse"),
-            accepts_bus_control=True if remote is None else remote,
-        )
-
-    def _hz(self, address: int, register: Register, words: tuple[int, ...]) -> float:
-        value = register.value(words)
-        if register.unit == "%":
-            return pct_to_hz(value, self.nominal_hz.get(address, DEFAULT_NOMINAL_HZ))
-        return value
-
-    def _value(self, exchange: Exchange, words: tuple[int, ...]) -> ParameterValue:
-        key = exchange.parameter
-        assert key is not None
-        profile = self._known(exchange.address)
-        register = self._scaled(profile, key_register(key))
-        listed = profile.values if profile is not None else ()
-        title = next((v.name for v in listed if same_register(v.register, register)), "")
-        raw = 0
-        for word in words:
-            raw = raw << 16 | word
-        return ParameterValue(
-            parameter=key,
-            index=0,
-            raw=raw,
-            value=register.value(words),
-            unit=register.unit,
-            title=title,
-        )
-
-    @staticmethod
-    def _scaled(profile: DriveProfile | None, register: Register) -> Register:
-        """``register`` with the scaling the profile gives it, if the profile lists it."""
-        if profile is None:
-            return register
-        listed = [v.register for v in profile.values]
-        listed += [r for r in profile.watchdog.registers]
-        listed += [profile.reference, profile.output_frequency]
-        return next((r for r in listed if same_register(r, register)), register)
 
     # ------------------------------------------------------------------ building
 
