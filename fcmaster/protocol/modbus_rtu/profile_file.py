@@ -292,10 +292,8 @@ def _watchdog(data: Mapping[str, Any], problems: Problems) -> WatchdogProfile:
             _text(entry.get("action"), f"{path}.action", problems),
             None if stops is None else _flag(stops, f"{path}.stops", problems),
         )
-    if "action" in registers and not actions:
-        problems.append(
-            ("watchdog.actions", "missing: what each value of the action register means")
-        )
+    # Without ``actions`` the action register is read but its values mean nothing known:
+    # the verdict stays unknown until the file says which values stop the motor.
     fixed = data.get("fixed_action", "trip")
     return WatchdogProfile(
         timeout=registers.get("timeout"),

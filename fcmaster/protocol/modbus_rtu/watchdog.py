@@ -59,7 +59,7 @@ def profile_facts(profile: object) -> WatchdogFacts | None:
     def encode(timeout_s: float, action: str) -> tuple[tuple[str, float], ...]:
         check_timeout(facts, timeout_s, action)
         writes: list[tuple[str, float]] = [(names["timeout"], timeout_s)]
-        if "action" in names:
+        if "action" in names and action in stopping:  # else the file says no value's meaning
             writes.append((names["action"], stopping[action]))
         if "enable" in names:
             writes.append((names["enable"], 1))

@@ -236,3 +236,12 @@ def test_each_drives_watchdog_facts_come_from_its_profile() -> None:
         abb.encode(3.0, "warning")  # an action that lets the motor run is never written
     # A drive without a profile has the line's facts, which read nothing.
     assert spec.drive_watchdog(None, None).parameters == ()
+
+
+def test_a_watchdog_action_register_without_its_meanings_reads_as_unknown() -> None:
+    # DESIGN's own example names the action register and not what its values mean.
+    text = USER_PROFILE.replace(
+        '  actions: {0: {action: "off", stops: false}, 1: {action: "trip", stops: true}}\n', ""
+    )
+    setting = parse_profile_text(text).watchdog.setting([2.0, 1])
+    assert (setting.timeout_s, setting.action, setting.stops) == (2.0, "option 1", None)
