@@ -125,16 +125,21 @@ class Case:
         return None if self.spec.profile_of is None else self.spec.profile_of(address)
 
     def transaction_s(self) -> float:
-        """T: the mean ideal time of one idle poll over the rotation (module docstring)."""
+        """T: the mean ideal time of one idle poll over the rotation (module docstring).
+
+        Over every drive's rotation: on a Modbus line each drive polls as its profile says.
+        """
         plan = self.plan("")
         codec: DriveCodec = codec_for(plan)
-        address = self.spec.first_address
         times = []
-        for read in codec.poll_sequence(codec.default_monitor()):
-            # (a line of several profiles: the first drive's rotation stands for all)
-            exchange = codec.poll(address, None, read)
-            wire = plan.wire_s(len(exchange.request) + exchange.reply_length)
-            times.append(wire + self.spec.answer_s(exchange) + codec.min_pause_s(plan.char_s))
+        for drive in plan.drives:
+            monitor = codec.default_monitor() if drive.monitor is None else drive.monitor
+            keys = tuple(codec.parameter(m) if isinstance(m, str) else m for m in monitor)
+            for read in codec.poll_sequence(keys):
+                exchange = codec.poll(drive.address, None, read)
+                wire = plan.wire_s(len(exchange.request) + exchange.reply_length)
+                pause = codec.min_pause_s(plan.char_s)
+                times.append(wire + self.spec.answer_s(exchange) + pause)
         return sum(times) / len(times)
 
 
