@@ -1,6 +1,6 @@
 """Line efficiency per protocol: the real master against the timed simulator over a pty.
 
-Run: ``python benchmarks/bus_protocols.py --protocol mitsubishi [--baudrates 9600,19200]
+Run: ``python benchmarks/bus_protocols.py --protocol modbus-rtu [--baudrates 19200,115200]
 [--drives 8] [--duration S] [--output PATH]``.
 
 This is the protocol-neutral sibling of ``benchmarks/bus.py`` (which measures the FC line
@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import itertools
 import os
 import subprocess
 import sys
@@ -47,12 +48,14 @@ import results_file
 
 from fcmaster import logsetup
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
+from fcmaster.bus.frame_log import RX, TX, FrameRecord
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.clock import MonotonicClock, new_event_loop
 from fcmaster.protocol.codec import DriveCodec, Exchange
 from fcmaster.sim import DriveSettings, LineSettings, PtyServer, build_line
 from fcmaster.sim.mitsubishi.drive import DEFAULT_CHECK_S
+from fcmaster.sim.modbus_rtu import profile_for
 from fcmaster.transport.serial import SerialTransport
 
 WARMUP_S: Final = 0.5
@@ -70,6 +73,8 @@ class Protocol:
     # the simulated drive's delay from the end of a request to its reply
     answer_s: Callable[[Exchange], float]
     drive: DriveSettings = field(default_factory=DriveSettings)  # every simulated drive
+    # the profile of the drive at an address, for protocols whose drives follow one
+    profile_of: Callable[[int], object] | None = None
 
 
 PROTOCOLS: Final[dict[str, Protocol]] = {
@@ -78,6 +83,16 @@ PROTOCOLS: Final[dict[str, Protocol]] = {
     "mitsubishi": Protocol("E", 2, 0, lambda exchange: DEFAULT_CHECK_S),  # stations 0-31
     # Factory 8N1 (F2.14 = 03), every drive answering 5 ms after a request.
     "enc": Protocol("N", 1, 1, lambda exchange: 0.005, DriveSettings(response_delay_s=0.005)),
+    # Factory 8E1 (Serial Line §2.5.1), every drive answering 2 ms after a request; the
+    # simulated drives follow the built-in profiles in turn by address, and so does the plan.
+    "modbus-rtu": Protocol(
+        "E",
+        1,
+        1,
+        lambda exchange: 0.002,
+        DriveSettings(response_delay_s=0.002),
+        profile_of=lambda address: profile_for(address, DriveSettings()),
+    ),
 }
 
 
@@ -100,21 +115,31 @@ class Case:
         plan = LinePlan(
             name="bench", port=port, protocol=self.protocol, baudrate=self.baudrate,
             parity=self.spec.parity, stopbits=self.spec.stopbits,
-            drives=tuple(DrivePlan(name=f"d{a}", address=a)
+            drives=tuple(DrivePlan(name=f"d{a}", address=a, profile=self.profile(a))
                          for a in range(first, first + self.drives)),
         )  # fmt: skip
         return with_protocol_delay(plan)
 
+    def profile(self, address: int) -> object:
+        """The drive profile of the drive at ``address`` (None: the protocol has none)."""
+        return None if self.spec.profile_of is None else self.spec.profile_of(address)
+
     def transaction_s(self) -> float:
-        """T: the mean ideal time of one idle poll over the rotation (module docstring)."""
+        """T: the mean ideal time of one idle poll over the rotation (module docstring).
+
+        Over every drive's rotation: on a Modbus line each drive polls as its profile says.
+        """
         plan = self.plan("")
         codec: DriveCodec = codec_for(plan)
-        address = self.spec.first_address
         times = []
-        for read in codec.poll_sequence(codec.default_monitor()):
-            exchange = codec.poll(address, None, read)
-            wire = plan.wire_s(len(exchange.request) + exchange.reply_length)
-            times.append(wire + self.spec.answer_s(exchange) + codec.min_pause_s(plan.char_s))
+        for drive in plan.drives:
+            monitor = codec.default_monitor() if drive.monitor is None else drive.monitor
+            keys = tuple(codec.parameter(m) if isinstance(m, str) else m for m in monitor)
+            for read in codec.poll_sequence(keys):
+                exchange = codec.poll(drive.address, None, read)
+                wire = plan.wire_s(len(exchange.request) + exchange.reply_length)
+                pause = codec.min_pause_s(plan.char_s)
+                times.append(wire + self.spec.answer_s(exchange) + pause)
         return sum(times) / len(times)
 
 
@@ -179,9 +204,16 @@ async def run_case(case: Case, path: str, duration_s: float) -> dict[str, Any]:
         await asyncio.sleep(WARMUP_S)
         stats = master.stats
         replies, timeouts, start = stats.replies, stats.timeouts, clock.now()
-        await asyncio.sleep(duration_s)
+        frames, seq = [], master.frames.since().next
+        while clock.now() - start < duration_s:
+            await asyncio.sleep(0.1)  # the frame log holds the last frames only: read often
+            taken = master.frames.since(seq)
+            frames += taken.frames
+            seq = taken.next
         elapsed = clock.now() - start
         replies, timeouts = stats.replies - replies, stats.timeouts - timeouts
+    pauses = _pauses(frames)
+    shortest = codec_for(plan).min_pause_s(plan.char_s)
     transaction_s = case.transaction_s()
     per_s = replies / elapsed
     return {
@@ -193,9 +225,23 @@ async def run_case(case: Case, path: str, duration_s: float) -> dict[str, Any]:
         "ideal_transaction_ms": round(transaction_s * 1000, 3),
         "efficiency": round(per_s * transaction_s, 4),
         "timeouts": timeouts,
+        # from a reply's arrival to the next request's write, as the master's frame log has it
+        "pause_min_ms": round(min(pauses) * 1000, 3) if pauses else None,
+        "pause_median_ms": round(sorted(pauses)[len(pauses) // 2] * 1000, 3) if pauses else None,
+        "protocol_pause_ms": round(shortest * 1000, 3),
+        "requests_sooner_than_the_pause": sum(p < shortest for p in pauses),
         "seconds": round(elapsed, 2),
         "load_average": os.getloadavg()[0],
     }
+
+
+def _pauses(frames: list[FrameRecord]) -> list[float]:
+    """Each time from a received frame to the request written next."""
+    return [
+        after[2] - before[2]
+        for before, after in itertools.pairwise(frames)
+        if before[1] == RX and after[1] == TX
+    ]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -224,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{row['protocol']:<11} {row['baudrate']:>6} {row['format']}  "
             f"{row['transactions_per_s']:>7.2f}/s  T={row['ideal_transaction_ms']:.2f} ms  "
             f"efficiency {row['efficiency']:.3f}  timeouts {row['timeouts']}  "
+            f"pause min {row['pause_min_ms']} ms (protocol {row['protocol_pause_ms']} ms, "
+            f"{row['requests_sooner_than_the_pause']} sooner)  "
             f"load {row['load_average']:.2f}",
             flush=True,
         )

@@ -45,6 +45,7 @@ from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.config_hints import in_words
 from fcmaster.config_modbus import check_modbus, modbus_units
+from fcmaster.config_profiles import drive_profile, profile_monitor
 from fcmaster.config_sections import (
     HttpModel,
     JournalModel,
@@ -103,6 +104,8 @@ class DriveModel(_Model):
     # seconds the status may take to show a start's or stop's result (None: a default)
     confirm_s: float | None = Field(default=None, gt=0, le=600)
     watchdog: WatchdogModel | None = None
+    # modbus-rtu: a built-in drive profile's name or a profile file (config_profiles)
+    profile: str | None = Field(default=None, min_length=1)
 
 
 class BusFields(_Model):
@@ -285,7 +288,7 @@ def parse(
             _check(partial, more)
             problems += [(renumber(path), renumber(reason)) for path, reason in more]
     else:
-        lines = _check(model, problems)
+        lines = _check(model, problems, path)
     if unset:  # what an unset variable left empty is not a problem of its own
         blank = {where for where, _ in unset}
         problems = unset + [(where, why) for where, why in problems if where not in blank]
@@ -349,7 +352,10 @@ def _valid(model: type[BaseModel], value: Any) -> bool:
     return True
 
 
-def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePlan, ...]:
+def _check(
+    model: ConfigModel, problems: list[tuple[str, str]], source: Path | None = None
+) -> tuple[LinePlan, ...]:
+    base = Path.cwd() if source is None else source.parent  # where profile files are found
     lines: list[LinePlan] = []
     drive_names: dict[str, tuple[str, str]] = {}
     bus_names: dict[str, tuple[str, str]] = {}
@@ -388,20 +394,27 @@ def _check(model: ConfigModel, problems: list[tuple[str, str]]) -> tuple[LinePla
                         f"{drive.min_frequency_hz} is above the maximum {max_hz}",
                     )
                 )
+            line_profile = getattr(bus, "profile", None)  # modbus-rtu: the line's own
+            profile = drive_profile(bus.protocol, drive.profile, base, at, problems, line_profile)
+            if profile is None and line_profile is not None:  # the line's serves the drive
+                profile = drive_profile(bus.protocol, line_profile, base, at, [])
             drives.append(
                 DrivePlan(
                     name=drive.name,
                     address=drive.address,
                     control=drive.control == "bus",
                     on_start=OnStart(drive.on_start),
-                    monitor=None if drive.monitor is None else tuple(drive.monitor),
+                    monitor=profile_monitor(profile)
+                    if drive.monitor is None
+                    else tuple(drive.monitor),
                     nominal_frequency_hz=drive.nominal_frequency_hz,
                     min_frequency_hz=drive.min_frequency_hz,
                     max_frequency_hz=max_hz,
                     confirm_s=drive.confirm_s,
                     watchdog=watchdog_plan(
-                        bus.protocol, drive.watchdog, drive.control, at, problems
+                        bus.protocol, drive.watchdog, drive.control, at, problems, profile
                     ),
+                    profile=profile,
                 )
             )
         problems.extend(_foreign_keys(bus, where))

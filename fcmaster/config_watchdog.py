@@ -29,13 +29,18 @@ def watchdog_plan(
     control: str,
     at: str,
     problems: list[tuple[str, str]],
+    profile: object = None,
 ) -> WatchdogPlan | None:
-    """A drive's ``watchdog`` as a plan; its problems, each at its key, into ``problems``."""
+    """A drive's ``watchdog`` as a plan; its problems, each at its key, into ``problems``.
+
+    ``profile``: the drive's profile, where its protocol has them (modbus-rtu), whose
+    watchdog registers and actions are the drive's.
+    """
     if wanted is None:
         return None
     # The protocol's facts for any line: where they depend on a line key (Mitsubishi's
     # drive_port: Pr.122 or Pr.336), only the parameter differs, not the actions or range.
-    facts = spec_for(protocol).watchdog
+    facts = spec_for(protocol).drive_watchdog(None, profile)
     action = wanted.action or facts.actions[0]
     found = len(problems)
     if control != "bus":

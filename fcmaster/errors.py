@@ -28,8 +28,9 @@ its facts as attributes, not only in the message::
     │                                                                    (adapters.auth)
     ├── ReadsBusy              too many viewer reads wait on a line, 429  (adapters.readlimit)
     └── Refused                a simulated drive's refusal, answered on the wire as its
-                               vendor's error code (sim.danfoss_fc, sim.enc; private in
-                               sim.mitsubishi and in the Modbus server, adapters.modbus)
+                               vendor's error code (sim.danfoss_fc, sim.enc,
+                               sim.modbus_rtu; private in sim.mitsubishi and in the
+                               Modbus server, adapters.modbus)
 
 The classes named with a module live there, beside the one place that raises them; the
 rest are here. ``tests/unit/test_errors.py`` checks that no exception class of the package

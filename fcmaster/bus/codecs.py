@@ -12,7 +12,8 @@ from fcmaster.protocol.registry import spec_for
 def codec_for(plan: LinePlan) -> DriveCodec:
     """A codec set up for ``plan``'s protocol and its protocol options."""
     nominal_hz = {drive.address: drive.nominal_frequency_hz for drive in plan.drives}
-    return spec_for(plan.protocol).codec(plan, nominal_hz)
+    profiles = {d.address: d.profile for d in plan.drives if d.profile is not None}
+    return spec_for(plan.protocol).codec(plan, nominal_hz, profiles)
 
 
 def with_protocol_delay(plan: LinePlan) -> LinePlan:

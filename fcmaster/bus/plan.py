@@ -46,6 +46,9 @@ class DrivePlan:
     # how long the status may take to show a start's or stop's result (None: a default)
     confirm_s: float | None = None
     watchdog: WatchdogPlan | None = None  # None: read and judged, never written
+    # The drive's profile where its protocol has them (modbus-rtu: a DriveProfile, built-in
+    # or read from the config's profile file); handed to the line's codec by address.
+    profile: object = None
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)

@@ -218,8 +218,12 @@ class WatchdogAudit:
 
     # -- one drive -------------------------------------------------------------------------
 
+    def _facts(self, drive: DrivePlan) -> WatchdogFacts:
+        """The drive's own facts where its profile has them (modbus-rtu), else the line's."""
+        return spec_for(self.plan.protocol).drive_watchdog(self.plan, drive.profile)
+
     async def _audit(self, drive: DrivePlan) -> None:
-        facts = self.facts
+        facts = self._facts(drive)
         if facts is None:  # pragma: no cover - every protocol has its facts
             self._finish(drive, None, f"no watchdog facts for {self.plan.protocol}")
             return
@@ -258,7 +262,7 @@ class WatchdogAudit:
         self, drive: DrivePlan, wanted: WatchdogPlan, writes: tuple[tuple[str, float], ...]
     ) -> None:
         """Write again once the drive is seen stopped; again refused: after its next stop."""
-        facts = self.facts
+        facts = self._facts(drive)
         assert facts is not None
         run_first = False  # the first retry: at the first stopped status, even if it is now
         while True:
@@ -392,8 +396,7 @@ class WatchdogAudit:
             return
         verdict = judge(setting, self.round_s)
         report = WatchdogReport(setting.timeout_s, setting.action, verdict)
-        facts = self.facts
-        assert facts is not None
+        facts = self._facts(drive)
         round_s = round(self.round_s, 4)
         suggested = suggested_timeout_s(self.round_s)
         fix = facts.advice(suggested)

@@ -24,6 +24,7 @@ _SPEC_MODULES: Final = {
     "danfoss-fc": "fcmaster.protocol.danfoss_fc.spec",
     "mitsubishi": "fcmaster.protocol.mitsubishi.spec",
     "enc": "fcmaster.protocol.enc.spec",
+    "modbus-rtu": "fcmaster.protocol.modbus_rtu.spec",
 }
 NAMES: Final = tuple(_SPEC_MODULES)  # in registry order: the choices of --protocol
 DEFAULT: Final = NAMES[0]

@@ -171,6 +171,11 @@ class ProtocolSpec(Generic[OptionsT]):
     line_keys: tuple[LineKey, ...] = ()
     # A codec for a line with these options; per address, what 100 % reference means in Hz.
     new_codec: Callable[[OptionsT, Mapping[int, float]], DriveCodec]
+    # Where each drive follows a profile of its own (modbus-rtu): a codec also given each
+    # address's profile (a DrivePlan's ``profile``); None: ``new_codec`` serves every line.
+    new_profiled_codec: (
+        Callable[[OptionsT, Mapping[int, float], Mapping[int, object]], DriveCodec] | None
+    ) = None
     factory: SerialSettings
     baudrates: tuple[int, ...]  # the rates the drives offer, fastest first
     parities: tuple[str, ...]  # the parities the drives offer, the factory one first
@@ -205,6 +210,9 @@ class ProtocolSpec(Generic[OptionsT]):
     # The watchdog facts of a line with these options where they depend on them (Mitsubishi:
     # the port the drives are wired to); None: ``watchdog`` on every line.
     watchdog_for: Callable[[OptionsT], WatchdogFacts] | None = None
+    # The watchdog facts of a drive with this profile (a DrivePlan's ``profile``) where its
+    # protocol's drives each follow one (modbus-rtu); None: the line's.
+    watchdog_of_profile: Callable[[object], WatchdogFacts | None] | None = None
 
     def options_of(self, source: object = None) -> OptionsT:
         """This protocol's options as ``source`` has them.
@@ -223,9 +231,19 @@ class ProtocolSpec(Generic[OptionsT]):
         return self.options(**given)
 
     def codec(
-        self, source: object = None, nominal_hz: Mapping[int, float] | None = None
+        self,
+        source: object = None,
+        nominal_hz: Mapping[int, float] | None = None,
+        profiles: Mapping[int, object] | None = None,
     ) -> DriveCodec:
-        """A codec for a line whose options ``source`` carries (see :meth:`options_of`)."""
+        """A codec for a line whose options ``source`` carries (see :meth:`options_of`).
+
+        ``profiles``: each address's drive profile, for a protocol that has them.
+        """
+        if self.new_profiled_codec is not None:
+            return self.new_profiled_codec(
+                self.options_of(source), nominal_hz or {}, profiles or {}
+            )
         return self.new_codec(self.options_of(source), nominal_hz or {})
 
     def addresses(self, source: object = None) -> range:
@@ -277,3 +295,11 @@ class ProtocolSpec(Generic[OptionsT]):
         if self.watchdog_for is None:
             return self.watchdog
         return self.watchdog_for(self.options_of(source))
+
+    def drive_watchdog(self, source: object, profile: object) -> WatchdogFacts:
+        """The watchdog facts of a drive with ``profile`` on a line with ``source``'s options."""
+        if self.watchdog_of_profile is not None:
+            facts = self.watchdog_of_profile(profile)
+            if facts is not None:
+                return facts
+        return self.watchdog_of(source)

@@ -140,6 +140,7 @@ def _drive(
             interlocked=bool(own.get("interlocked", False)),
             running_hz=float(own["running_hz"]) if "running_hz" in own else None,
             warning_cycle=_warning_cycle(own.get("warning"), f"{here}.warning"),
+            profile=drive.profile,  # modbus-rtu: the simulated drive follows the same profile
         )
     except (TypeError, ValueError) as exc:
         raise ConfigError([(here, str(exc))]) from exc

@@ -37,6 +37,9 @@ class DriveSettings:
     interlocked: bool = False  # acknowledges a start but does not turn (no run enable)
     running_hz: float | None = None  # already running at power-up, as a former master left it
     warning_cycle: tuple[int, float, float] | None = None  # (warning number, every_s, for_s)
+    # modbus-rtu: the drive profile it follows (a built-in's name or a DriveProfile; None:
+    # the built-ins in turn by address)
+    profile: object = None
 
     def started_at(self, now: float) -> float:
         """When the motor was started, for a drive powered up at ``now``.

@@ -266,7 +266,7 @@ async def examine(
             continue
         opened = True
         try:
-            survey.adapter = survey.adapter or getattr(transport, "adapter", None)
+            survey.adapter = survey.adapter or transport.adapter
             prober = _Prober(plan, transport, survey, clock)
             asked = _probe_list(prober.codec, probe, addresses)
             if await _anyone(prober, asked):

@@ -65,6 +65,13 @@ FACES: dict[str, set[str]] = {
         "is_paged", "lookup", "parse_ascii_frame", "parse_parameter", "resolve", "run_command",
         "split_terminator", "sum_check", "wait_digit",
     },
+    "fcmaster.protocol.modbus_rtu": {
+        "ADDRESSES", "BROADCAST", "EXCEPTION_TEXTS", "MAX_FRAME", "MAX_READ", "MAX_WRITE",
+        "Direction", "ExceptionCode", "ExceptionReply", "Function", "ReadRequest", "Registers",
+        "Request", "Response", "RtuFramer", "WriteMultiple", "WriteSingle", "Written", "crc16",
+        "crc_ok", "decode_request", "decode_response", "encode_request", "encode_response",
+        "exception_text", "reply_length", "with_crc",
+    },
     "fcmaster.sim": {
         "DriveSettings", "EncSimDrive", "FaultPlan", "FcSimDrive", "LineCounters",
         "LineSettings", "MitsubishiSimDrive", "Mode", "Motor", "MotorCommand", "MotorRating",
@@ -75,6 +82,9 @@ FACES: dict[str, set[str]] = {
     "fcmaster.sim.danfoss_fc": {
         "ALARM_BITS", "FcControl", "FcSimDrive", "ParameterStore", "Refused", "SETTINGS",
         "TRIP_LOCK_ALARMS", "WARNING_BITS",
+    },
+    "fcmaster.sim.modbus_rtu": {
+        "Machine", "ModbusSimDrive", "State", "profile_for",
     },
     "fcmaster.sim.enc": {
         "COMMUNICATION_FAULT", "EncControl", "EncRequestFramer", "EncSimDrive", "JOG_HZ",

@@ -24,8 +24,8 @@ from fcmaster.subcommands.commission import LineOptions
 PACKAGE = Path(fcmaster.__file__).parent
 
 
-def test_the_registry_lists_the_three_protocols_with_danfoss_fc_first() -> None:
-    assert NAMES == ("danfoss-fc", "mitsubishi", "enc")
+def test_the_registry_lists_the_four_protocols_with_danfoss_fc_first() -> None:
+    assert NAMES == ("danfoss-fc", "mitsubishi", "enc", "modbus-rtu")
     assert DEFAULT == "danfoss-fc"
 
 
@@ -35,8 +35,8 @@ def test_each_spec_builds_a_codec_of_its_own_protocol(name: str) -> None:
 
 
 def test_an_unknown_protocol_is_refused_with_the_known_ones() -> None:
-    with pytest.raises(UsageError, match=r"'modbus-rtu' is not supported \(have: danfoss-fc, "):
-        spec_for("modbus-rtu")
+    with pytest.raises(UsageError, match=r"'profibus' is not supported \(have: danfoss-fc, "):
+        spec_for("profibus")
 
 
 @pytest.mark.parametrize(
@@ -79,6 +79,7 @@ def test_factory_settings_fill_what_the_command_line_leaves_out() -> None:
         "danfoss-fc": (9600, "E", 1),
         "mitsubishi": (19200, "E", 2),
         "enc": (9600, "N", 1),
+        "modbus-rtu": (19200, "E", 1),  # Modbus over Serial Line §2.5.1: even parity
     }
 
 

@@ -13,7 +13,9 @@ from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.errors import UsageError
 from fcmaster.protocol import pcapng
 from fcmaster.protocol.framing import Frame
+from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
 from fcmaster.protocol.pcapng import Capture, Interface, LineFormat, Packet
+from fcmaster.protocol.registry import spec_for
 from fcmaster.sim import SimTransport
 from fcmaster.sim.danfoss_fc.replay import RULES as FC_RULES
 from fcmaster.sim.replay import KnownRequestFramer, ReplayDrive, replay_lines, replay_sim_line
@@ -114,11 +116,18 @@ def _capture_of(master: BusMaster) -> Capture:
 
 
 def _plan(protocol: str) -> LinePlan:
+    # modbus-rtu drives each follow a profile: the built-ins' first two here
+    profiled = spec_for(protocol).new_profiled_codec is not None
     return LinePlan(
         name="north",
         port="sim://north",
         protocol=protocol,
-        drives=tuple(DrivePlan(name=f"d{a}", address=a) for a in (1, 2)),
+        drives=tuple(
+            DrivePlan(
+                name=f"d{a}", address=a, profile=tuple(BUILT_IN.values())[a] if profiled else None
+            )
+            for a in (1, 2)
+        ),
     )
 
 
