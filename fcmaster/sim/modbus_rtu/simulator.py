@@ -7,6 +7,7 @@ from typing import Final
 from fcmaster.protocol.modbus_rtu.framer import Direction, RtuFramer
 from fcmaster.sim.line import SimDrive
 from fcmaster.sim.modbus_rtu.drive import ModbusSimDrive
+from fcmaster.sim.modbus_rtu.replay import RULES
 from fcmaster.sim.settings import DriveSettings, LineSettings
 from fcmaster.sim.simulator import SimProtocol
 
@@ -15,4 +16,4 @@ def _drive(address: int, settings: DriveSettings, line: LineSettings, now: float
     return ModbusSimDrive(address, settings, now=now, line=line)
 
 
-SIMULATOR: Final = SimProtocol(lambda _: RtuFramer(Direction.REQUESTS), _drive)
+SIMULATOR: Final = SimProtocol(lambda _: RtuFramer(Direction.REQUESTS), _drive, replay=RULES)

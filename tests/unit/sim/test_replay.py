@@ -170,12 +170,14 @@ def _mid_run_capture(master: BusMaster, after_s: float) -> Capture:
 
 async def _capture_of_bus_drives(protocol: str = "danfoss-fc") -> tuple[LinePlan, Capture]:
     """A capture begun mid-run on a master commanding two drives, the first one running."""
-    first_address = codec_for(_plan(protocol)).addresses.start + 1
+    base = _plan(protocol)
+    first_address = codec_for(base).addresses.start + 1
     addresses = (first_address, first_address + 1)
     plan = replace(
-        _plan(protocol),
+        base,
         drives=tuple(
-            DrivePlan(name=f"d{i}", address=a, control=True) for i, a in enumerate(addresses, 1)
+            DrivePlan(name=f"d{i}", address=a, control=True, profile=drive.profile)
+            for i, (a, drive) in enumerate(zip(addresses, base.drives, strict=True), 1)
         ),
     )
     clock = VirtualClock()
