@@ -209,12 +209,15 @@ class Service:
         if install_signals:
             for sig in (signal.SIGTERM, signal.SIGINT):
                 loop.add_signal_handler(sig, self.stop)
+        started = self.clock.now()  # what a restart costs each drive is counted from here
         try:
             async with AsyncExitStack() as stack:
                 for plan in self.config.lines:
                     # Each commanded drive's own watchdog is read and judged when it comes
                     # online (fcmaster.bus.watchdog).
-                    audit = WatchdogAudit(plan, clock=self.clock, report=self.fleet.drive_watchdog)
+                    audit = WatchdogAudit(
+                        plan, clock=self.clock, report=self.fleet.drive_watchdog, started_at=started
+                    )
                     master = BusMaster(
                         plan,
                         codec=codec_for(plan),

@@ -307,7 +307,7 @@ function stateParts(d) {
 const WATCHDOG_MEANING = {
   ok: "the drive stops by itself if the gateway dies",
   off: "the motor keeps running if the gateway dies",
-  too_short: "normal polling can trip the drive",
+  too_short: "normal polling or a gateway restart can trip the drive",
   unknown: "what the drive does cannot be told from its settings",
 };
 
@@ -318,7 +318,9 @@ function watchdogText(d) {
     return d.online ? "not judged yet: being read"
       : "not judged yet: the drive has not answered since the gateway started";
   }
-  const text = `${w.verdict} — timeout ${w.timeout_s ?? "–"} s, action ${w.action}: ${WATCHDOG_MEANING[w.verdict] || ""}`;
+  let text = `${w.verdict} — timeout ${w.timeout_s ?? "–"} s, action ${w.action}: ${WATCHDOG_MEANING[w.verdict] || ""}`;
+  // what the gateway's start cost the drive: a timeout shorter than this trips it at a restart
+  if (w.restart_gap_s != null) text += `; unfed ${w.restart_gap_s.toFixed(1)} s at the gateway's start`;
   return d.online ? text : `${text} (as read when the drive was last online)`;
 }
 
