@@ -11,14 +11,15 @@ reads like any other, served between polls, so polling keeps its pace — and ju
 setting against the line's worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
 
 * ``ok`` — the drive stops (ramp or trip) once it hears nothing for longer than a round,
-  and a gateway restart does not trip it: its timeout is longer than the round and longer
-  than the restart gap (``restart_gap_s``: from the daemon's start until the drive first
-  answered, so until its watchdog was fed again at the latest);
+  and a gateway restart does not trip it: its timeout covers the restart gap
+  (``restart_gap_s``: from the daemon's start until the drive first answered, so its first
+  telegram went out by then) and a round after it (the first telegram of an adopted drive
+  marks its control word not valid; the valid one follows within a round);
 * ``off`` — it keeps running if the gateway dies (watchdog off, or an action such as
   FC's freeze output that leaves the motor turning);
 * ``too_short`` — the timeout is shorter than a round, so normal polling trips it
   (Mitsubishi Pr.122 = 0 counts so: it trips as soon as the link commands), or shorter than
-  the restart gap, so a gateway restart trips it;
+  the restart gap and a round, so a gateway restart trips it;
 * ``unknown`` — the reads failed, or the setting's effect cannot be told (FC's set-up
   switch).
 
@@ -127,14 +128,15 @@ class WatchdogReport:
 def judge(setting: WatchdogSetting, round_s: float, restart_gap_s: float = 0.0) -> Verdict:
     """The verdict on ``setting`` for a line whose worst-case poll round is ``round_s``.
 
-    ``restart_gap_s``: how long the drive went unfed at the daemon's start; a timeout that
-    does not cover it trips the drive at every gateway restart.
+    ``restart_gap_s``: how long the daemon's start took to reach the drive; a timeout that
+    does not cover it and a round after it (the first valid control word) trips the drive at
+    every gateway restart.
     """
     if setting.stops is False or setting.timeout_s is None:
         return Verdict.OFF
     if setting.stops is None:
         return Verdict.UNKNOWN
-    if setting.timeout_s < max(round_s, restart_gap_s):
+    if setting.timeout_s < restart_gap_s + round_s:
         return Verdict.TOO_SHORT
     return Verdict.OK
 

@@ -409,8 +409,9 @@ async def test_the_same_warning_is_given_once_not_at_every_return_of_the_drive()
         (2.0, 0.1, 1.0, Verdict.OK),
         (2.0, 0.1, 2.5, Verdict.TOO_SHORT),
         (2.0, 2.5, 1.0, Verdict.TOO_SHORT),
+        (2.0, 1.0, 1.5, Verdict.TOO_SHORT),  # the valid word comes a round after the gap
     ],
-    ids=["both-fit", "restart-longer", "round-longer"],
+    ids=["both-fit", "restart-longer", "round-longer", "together-longer"],
 )
 def test_the_verdict_is_ok_only_when_the_round_and_the_restart_gap_both_fit(
     timeout_s: float, round_s: float, gap_s: float, verdict: Verdict
