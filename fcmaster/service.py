@@ -36,6 +36,7 @@ from typing import Any
 
 import structlog
 
+from fcmaster import health
 from fcmaster.adapters.gateway import LineInfo
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
@@ -210,6 +211,7 @@ class Service:
             for sig in (signal.SIGTERM, signal.SIGINT):
                 loop.add_signal_handler(sig, self.stop)
         started = self.clock.now()  # what a restart costs each drive is counted from here
+        health.watch_gc()  # its pauses stall every line's timers: /metrics shows them
         try:
             async with AsyncExitStack() as stack:
                 for plan in self.config.lines:
@@ -238,10 +240,13 @@ class Service:
                     settings = getattr(self.config, section)
                     if settings is not None:
                         await stack.enter_async_context(self._adapter(target, settings))
+                # What start-up built lives as long as the daemon: out of the collector's way.
+                frozen = health.freeze_start_up()
                 log.info(
                     "service.started",
                     lines=len(self.masters),
                     drives=sum(len(p.drives) for p in self.config.lines),
+                    gc_frozen=frozen,
                 )
                 notify_systemd("READY=1")
                 stats = asyncio.create_task(self._publish_stats(), name="service.stats")
@@ -262,6 +267,7 @@ class Service:
             if install_signals:
                 for sig in (signal.SIGTERM, signal.SIGINT):
                     loop.remove_signal_handler(sig)
+            health.thaw()  # what was frozen may go now (a process that serves again)
         log.info("service.stopped")
 
     def _adapter(self, target: str, settings: Any) -> AbstractAsyncContextManager[Any]:

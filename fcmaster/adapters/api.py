@@ -67,6 +67,7 @@ from fcmaster.adapters.schemas import (
 from fcmaster.adapters.stream import StreamRegistry, serve_stream
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.errors import UsageError
+from fcmaster.health import gc_pauses
 from fcmaster.protocol.parameter_set import ParameterSet
 from fcmaster.state import AvailabilityChanged, CommandCompleted, ConditionChanged, rfc3339
 
@@ -429,7 +430,7 @@ def create_app(
         async def metrics_page(_: Viewer) -> Response:
             """Prometheus metrics (text exposition format 0.0.4), from the state in memory."""
             text = await metrics.render_async(
-                gateway.fleet.snapshot(), gateway.lines(), gateway.hub
+                gateway.fleet.snapshot(), gateway.lines(), gateway.hub, gc_pauses=gc_pauses()
             )
             return Response(text, media_type=metrics.CONTENT_TYPE)
 
