@@ -176,6 +176,15 @@ def answered_polls(b: Bench, start: float, end: float) -> dict[int, list[float]]
     return times
 
 
+async def all_alive_interval(options: dict[str, Any], span: float = 20.0) -> float:
+    """A present drive's poll interval with only the present drives configured."""
+    alone = fleet(PRESENT, PRESENT, **options)
+    async with alone.master:
+        await alone.clock.run_until(T0 + span)
+    full = answered_polls(alone, T0, T0 + span)
+    return span * PRESENT / sum(len(t) for t in full.values())
+
+
 async def test_from_start_absent_drives_are_tried_in_the_probe_share_not_polled_as_present() -> (
     None
 ):
@@ -224,3 +233,23 @@ async def test_absent_drives_powering_up_one_by_one_are_found_within_the_probes_
     for address, at in powered.items():
         found = online[f"d{address}"] - at
         assert 0 < found <= wait + probe_cost(b), (address, found, wait)
+
+
+async def test_after_a_reopen_the_drives_not_heard_yet_still_wait_for_the_probes_share() -> None:
+    options = {"baudrate": 115200, "timeout_s": 0.1, "retries": 1}
+    b = fleet(126, PRESENT, **options)
+    async with b.master:
+        await b.clock.run_until(T0 + 5.0)  # most absent drives not tried yet
+        untried = sum(s.online is None for s in b.master.planner.slots)
+        assert untried > 90
+        b.transport.lost = True  # the adapter is unplugged and plugged back in
+        await b.clock.run_until(T0 + 25.0)
+        assert b.master.is_up
+    assert [up for up, _, _ in b.observer.lines] == [True, False, True]
+    back = b.observer.lines[2][2]
+    polled = answered_polls(b, back, T0 + 25.0)
+    bound = max(0.5, 3 * await all_alive_interval(options))
+    for address in range(1, PRESENT + 1):
+        times = [back, *polled[address], T0 + 25.0]
+        longest = max(after - before for before, after in itertools.pairwise(times))
+        assert longest <= bound, (address, longest)
