@@ -212,6 +212,10 @@ class Service:
                 loop.add_signal_handler(sig, self.stop)
         started = self.clock.now()  # what a restart costs each drive is counted from here
         health.watch_gc()  # its pauses stall every line's timers: /metrics shows them
+        for section, target in ADAPTERS.items():
+            if getattr(self.config, section) is not None:
+                # Imported before the lines start: an import stalls the loop, and every line.
+                importlib.import_module(target.partition(":")[0])
         try:
             async with AsyncExitStack() as stack:
                 for plan in self.config.lines:
