@@ -231,7 +231,7 @@ class Service:
                         clock=self.clock,
                         observer=audit.observing(self.fleet),
                     )
-                    audit.attach(master.execute)
+                    audit.attach(master.execute, master.stats)
                     self._audits.append(audit)
                     self.masters[plan.name] = await stack.enter_async_context(master)
                     stack.push_async_callback(audit.aclose)  # before its line closes

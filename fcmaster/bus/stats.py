@@ -50,6 +50,7 @@ class DriveStats:
     timeouts: int = 0
     refused: int = 0
     last_latency_s: float | None = None
+    first_request_at: float | None = None  # the master's first telegram to the drive
 
 
 @dataclass(slots=True)

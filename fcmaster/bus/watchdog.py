@@ -12,9 +12,10 @@ setting against the line's worst-case poll round (:func:`~fcmaster.bus.poll_roun
 
 * ``ok`` — the drive stops (ramp or trip) once it hears nothing for longer than a round,
   and a gateway restart does not trip it: its timeout covers the restart gap
-  (``restart_gap_s``: from the daemon's start until the drive first answered, so its first
-  telegram went out by then) and a round after it (the first telegram of an adopted drive
-  marks its control word not valid; the valid one follows within a round);
+  (``restart_gap_s``: from the daemon's start until its first telegram to the drive, which
+  the drive answered then or, powered off meanwhile, later) and a round after it (the first
+  telegram of an adopted drive marks its control word not valid; the valid one follows
+  within a round);
 * ``off`` — it keeps running if the gateway dies (watchdog off, or an action such as
   FC's freeze output that leaves the motor turning);
 * ``too_short`` — the timeout is shorter than a round, so normal polling trips it
@@ -63,6 +64,7 @@ from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.master import BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, WatchdogPlan
 from fcmaster.bus.poll_round import poll_round_s
+from fcmaster.bus.stats import LineStats
 from fcmaster.clock import Clock
 from fcmaster.protocol.codec import Reply
 from fcmaster.protocol.drive import ControlIntent
@@ -167,6 +169,7 @@ class WatchdogAudit:
         # the daemon's start (default: now); each drive's first answer since, less this
         self.started_at = clock.now() if started_at is None else started_at
         self.restart_gaps: dict[str, float] = {}
+        self._stats: LineStats | None = None
         self._turn = asyncio.Lock()  # one audit exchange at a time on the line
         self.facts = spec_for(plan.protocol).watchdog_of(plan)  # Mitsubishi: by drive_port
         self.round_s = poll_round_s(plan)[0] if plan.drives else 0.0
@@ -182,9 +185,13 @@ class WatchdogAudit:
         # first); while any waits, the observer shows the audit the replies
         self._stop_waits: dict[str, tuple[asyncio.Future[None], bool]] = {}
 
-    def attach(self, execute: Execute) -> None:
-        """Send the audit's reads and writes through ``execute`` (the line's BusMaster)."""
+    def attach(self, execute: Execute, stats: LineStats | None = None) -> None:
+        """Send the audit's reads and writes through ``execute`` (the line's BusMaster).
+
+        ``stats``: the line's, where the master notes its first telegram to each drive.
+        """
         self._execute = execute
+        self._stats = stats
 
     def observing(self, inner: BusObserver) -> BusObserver:
         """``inner``, with this audit told when a drive comes online."""
@@ -194,8 +201,13 @@ class WatchdogAudit:
     def drive_online(self, drive: DrivePlan, at: float | None = None) -> None:
         """``drive`` answers again (at ``at``): audit it (again), ending one under way."""
         if at is not None and drive.name not in self.restart_gaps:
-            # The daemon's first telegram to the drive went out at the latest then.
-            self.restart_gaps[drive.name] = max(0.0, at - self.started_at)
+            # The daemon's first telegram to the drive: a drive that answers only later was
+            # not there (powered off), and its watchdog was not running meanwhile.
+            counters = None if self._stats is None else self._stats.drives.get(drive.name)
+            first = None if counters is None else counters.first_request_at
+            self.restart_gaps[drive.name] = max(
+                0.0, (at if first is None else first) - self.started_at
+            )
         self._offline.discard(drive.name)
         if not drive.control or self._execute is None or self._stopped:
             return

@@ -59,7 +59,7 @@ def _bench(
         observer=audit.observing(observer),
         rng=random.Random(1),
     )
-    audit.attach(master.execute)
+    audit.attach(master.execute, master.stats)
     return Bench(clock, transport, master, observer, {d.address: d for d in fc}), reports, audit
 
 
@@ -434,8 +434,24 @@ async def test_a_timeout_shorter_than_the_restart_gap_is_too_short_and_the_gap_s
     assert first > T0 + 2.5
     ((name, report),) = reports
     assert (name, report.timeout_s, report.verdict) == ("a", 2.0, Verdict.TOO_SHORT)
-    assert report.restart_gap_s == pytest.approx(_first_reply_at(b, "a") - T0)
+    assert report.restart_gap_s == pytest.approx(first - T0)  # the first telegram to it
     assert report.to_json()["restart_gap_s"] == report.restart_gap_s
     warning = next(e for e in logs if e["event"] == "drive.watchdog_too_short")
     assert warning["consequence"] == "a gateway restart trips the drive"
     assert warning["restart_gap_s"] == pytest.approx(report.restart_gap_s, abs=1e-3)
+
+
+async def test_a_drive_powered_up_late_is_judged_by_the_first_telegram_it_was_sent() -> None:
+    a = DrivePlan(name="a", address=1, control=True)
+    b, reports, audit = _bench(a, fc=[_drive(1, 10, 2, silent=True)])  # 1.0 s, stop
+    async with b.master:
+        await b.clock.run_until(T0 + 8.0)  # unpowered: its watchdog is not running either
+        b.drives[1].silent = False
+        await b.clock.run_until(T0 + 20.0)
+        await audit.aclose()
+    ((name, report),) = reports
+    assert _first_reply_at(b, "a") > T0 + 8.0
+    assert report.restart_gap_s == pytest.approx(b.requests(1)[0][0] - T0)
+    assert report.restart_gap_s is not None
+    assert report.restart_gap_s < 0.1
+    assert (name, report.verdict) == ("a", Verdict.OK)
