@@ -43,6 +43,7 @@ from typing import Any
 import structlog
 
 from fcmaster import config as config_module
+from fcmaster import health
 from fcmaster.adapters.gateway import LineInfo
 from fcmaster.bus.audit import audit, command_values
 from fcmaster.bus.codecs import codec_for
@@ -118,6 +119,7 @@ class Service:
         self.config = config
         self.demo = demo
         self.clock = clock or MonotonicClock()
+        self._started_at = self.clock.now()  # run() sets it again: a restart's gaps count from it
         self.hub = Hub()
         self.fleet = FleetState(config.lines, emit=self.hub.publish, clock=self.clock)
         self.journal = Journal(
@@ -268,6 +270,12 @@ class Service:
             loop.add_signal_handler(signal.SIGHUP, self.request_reload)
             fit_file_limit()
             RepeatedErrors(loop).install()
+        self._started_at = self.clock.now()  # what a restart costs each drive counts from here
+        health.watch_gc()  # its pauses stall every line's timers: /metrics shows them
+        for section, target in ADAPTERS.items():
+            if getattr(self.config, section) is not None:
+                # Imported before the lines start: an import stalls the loop, and every line.
+                importlib.import_module(target.partition(":")[0])
         try:
             async with AsyncExitStack() as stack:
                 # First in, last out: it sees the lines open and every command end.
@@ -278,8 +286,10 @@ class Service:
                 stack.push_async_callback(self._stop_adapters)
                 for section in ADAPTERS:
                     await self.start_adapter(section)
+                # What start-up built lives as long as the daemon: out of the collector's way.
+                frozen = health.freeze_start_up()
                 lines, drives = len(self.masters), sum(len(p.drives) for p in self.config.lines)
-                log.info("service.started", lines=lines, drives=drives)
+                log.info("service.started", lines=lines, drives=drives, gc_frozen=frozen)
                 self.journal.note("start", lines=lines, drives=drives)
                 notify_systemd("READY=1")
                 self.reloader.ready()
@@ -308,6 +318,7 @@ class Service:
             if install_signals:
                 for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
                     loop.remove_signal_handler(sig)
+            health.thaw()  # what was frozen may go now (a process that serves again)
         log.info("service.stopped")
 
     async def open_line(self, plan: LinePlan) -> None:
@@ -316,7 +327,12 @@ class Service:
         self._line_stacks[plan.name] = stack
         # Each commanded drive's own watchdog is read and judged when it comes online
         # (fcmaster.bus.watchdog).
-        audit = WatchdogAudit(plan, clock=self.clock, report=self.fleet.drive_watchdog)
+        audit = WatchdogAudit(
+            plan,
+            clock=self.clock,
+            report=self.fleet.drive_watchdog,
+            started_at=self._started_at,
+        )
         master = BusMaster(
             plan,
             codec=codec_for(plan),
@@ -324,7 +340,7 @@ class Service:
             clock=self.clock,
             observer=audit.observing(self.fleet),
         )
-        audit.attach(master.execute)
+        audit.attach(master.execute, master.stats)
         self._audits.append(audit)
         stack.callback(self._audits.remove, audit)
         try:

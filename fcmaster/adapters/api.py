@@ -71,6 +71,7 @@ from fcmaster.adapters.schemas import (
 from fcmaster.adapters.stream import StreamRegistry, serve_stream
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.errors import UsageError
+from fcmaster.health import gc_pauses
 from fcmaster.journal import KINDS, MAX_LIMIT, parse_since
 from fcmaster.protocol.parameter_set import ParameterSet
 from fcmaster.state import AvailabilityChanged, CommandCompleted, ConditionChanged, rfc3339
@@ -468,7 +469,7 @@ def create_app(
         async def metrics_page(_: Viewer) -> Response:
             """Prometheus metrics (text exposition format 0.0.4), from the state in memory."""
             text = await metrics.render_async(
-                gateway.fleet.snapshot(), gateway.lines(), gateway.hub
+                gateway.fleet.snapshot(), gateway.lines(), gateway.hub, gc_pauses=gc_pauses()
             )
             text += config_metrics.render(gateway.config_status())
             return Response(text, media_type=metrics.CONTENT_TYPE)

@@ -26,7 +26,8 @@ Line metrics (label ``bus``): ``fcmaster_bus_info`` (``port``, ``protocol``,
 ``baudrate``), ``fcmaster_bus_up``, ``fcmaster_bus_utilisation_ratio``, counters
 ``fcmaster_bus_{requests,replies,timeouts,retries,broadcasts,checksum_errors,
 malformed_frames,unexpected_replies,noise_bytes,late_bytes,reopens}_total``, and histograms
-``fcmaster_bus_transaction_latency_seconds`` and ``fcmaster_bus_turnaround_seconds``.
+``fcmaster_bus_transaction_latency_seconds``, ``fcmaster_bus_turnaround_seconds`` and
+``fcmaster_bus_wakeup_lateness_seconds``; the daemon adds ``fcmaster_gc_pause_seconds``.
 
 Hub: ``fcmaster_hub_subscriptions``, ``fcmaster_hub_events_published_total`` and
 ``fcmaster_hub_events_dropped`` (dropped for subscribers now connected).
@@ -64,6 +65,7 @@ _LINE_COUNTERS: Final = (
 _LINE_HISTOGRAMS: Final = (
     ("latency_s", "transaction_latency_seconds", "From request written to reply decoded."),
     ("turnaround_s", "turnaround_seconds", "The master's own time between two transactions."),
+    ("wakeup_lateness_s", "wakeup_lateness_seconds", "How late the line's timers fired."),
 )
 _DRIVE_COUNTERS: Final = (
     ("requests", "Requests addressed to the drive."),
@@ -341,8 +343,12 @@ async def render_async(
     hub: Hub | None = None,
     *,
     slice_size: int = YIELD_EVERY,
+    gc_pauses: Mapping[str, Any] | None = None,
 ) -> str:
-    """:func:`render`, letting the event loop run (the lines) every ``slice_size`` drives."""
+    """:func:`render`, letting the event loop run (the lines) every ``slice_size`` drives.
+
+    ``gc_pauses``: the collector's pauses (``fcmaster.health.gc_pauses``), if watched.
+    """
     x = Exposition()
     for n, state in enumerate(drives, 1):
         _drive(x, state)
@@ -352,4 +358,6 @@ async def render_async(
         _line(x, line)
     if hub is not None:
         _hub(x, hub)
+    if gc_pauses is not None:
+        x.histogram("fcmaster_gc_pause_seconds", "The garbage collector's pauses.", gc_pauses, "")
     return x.render()

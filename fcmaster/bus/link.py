@@ -156,9 +156,13 @@ class Link:
 
     async def send(self, exchange: Exchange) -> None:
         """Wait for the line to be free, drop stale input, and write the request."""
-        if self.ready_at > self.clock.now():
-            await self.clock.sleep_until(self.ready_at)
-        written_at = self._writing(exchange)
+        ready_at = self.ready_at
+        if ready_at > self.clock.now():
+            await self.clock.sleep_until(ready_at)
+            written_at = self._writing(exchange)
+            self.stats.wakeup_lateness.observe(written_at - ready_at)
+        else:
+            written_at = self._writing(exchange)
         await self.transport.write(exchange.request)
         self._written(exchange, written_at)
 
@@ -293,11 +297,16 @@ class Link:
                     # A gap (or the deadline): an unfinished frame will not be completed.
                     framer.reset()
                     reply = self._drain(exchange)
-                    if reply is None and self.clock.now() < self._deadline:
-                        piece = self._watch_frame(framer, self._deadline, self._gap, self._on_piece)
-                        if piece is None:
-                            return  # wait on
-                        continue
+                    if reply is None:
+                        late = self.clock.now() - self._deadline
+                        if late < 0:
+                            piece = self._watch_frame(
+                                framer, self._deadline, self._gap, self._on_piece
+                            )
+                            if piece is None:
+                                return  # wait on
+                            continue
+                        self.stats.wakeup_lateness.observe(late)
                 else:
                     self._arrived = transport.received_at
                     reply = self._take(exchange, piece)

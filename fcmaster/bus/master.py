@@ -96,6 +96,7 @@ class BusMaster:
             sent=self._sent,
             replied=self._replied,
             failed=self._failed,
+            lateness=self.stats.wakeup_lateness,
         )
         self._observer: BusObserver = observer or NullObserver()
         self._rng = rng or random.Random()
@@ -352,14 +353,19 @@ class BusMaster:
             if steady.carries(step):
                 await steady.run(step)  # polls in callbacks, until another kind of step
                 continue
-            if link.ready_at > now:
+            ready_at = link.ready_at
+            if ready_at > now:
                 # The next step was chosen (and encoded) inside the pause, where it is free.
-                await clock.sleep_until(link.ready_at)
+                await clock.sleep_until(ready_at)
                 if not planner.still_next(step):
                     # A command came in meanwhile (it may go first, or supersede or replace
                     # this one), or this one ended (cancelled at shutdown): choose again.
                     continue
-            planner.commit(step, clock.now())
+                now = clock.now()
+                self.stats.wakeup_lateness.observe(now - ready_at)
+            else:
+                now = clock.now()
+            planner.commit(step, now)
             exchange = step.exchange
             await link.send(exchange)
             self._sent(step)

@@ -16,8 +16,9 @@ Polls, probes, demotion, the probe budget and line silence are the
 :class:`~fcmaster.bus.rotation.Rotation`'s. Commands are retried up to ``retries`` times,
 each retry going back to the head of its queue so an urgent stop can still come in between.
 Idle polls are never retried: a failed poll counts toward demotion and the round moves on,
-so a dead drive costs one timeout per round until it is demoted, then one probe in its
-turn, within the probes' share of the line.
+so a drive that stops answering costs one timeout per round until it is demoted, then one
+probe in its turn, within the probes' share of the line. A drive not heard from since the
+line opened is not in the round: its one poll goes in the probes' share.
 
 Choosing and doing are apart: :meth:`Planner.peek` chooses the next step and changes
 nothing; :meth:`Planner.commit` makes it happen when it goes on the wire. A step chosen

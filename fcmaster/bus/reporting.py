@@ -138,7 +138,10 @@ class LineReporter:
         if step.pending is not None and step.pending.attempts:
             self._stats.retries += 1
         if step.slot is not None:
-            self._stats.drives[step.slot.plan.name].requests += 1
+            drive = self._stats.drives[step.slot.plan.name]
+            if not drive.requests:
+                drive.first_request_at = self._clock.now()
+            drive.requests += 1
 
     def count_reply(self, step: Step, reply: Reply, latency: float) -> None:
         """``step`` was answered."""

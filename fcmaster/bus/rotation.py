@@ -1,12 +1,21 @@
 """Which drive the line serves when no command waits, and which drives count as present.
 
-Polls go round-robin over the drives that are not demoted. A drive that fails
-``offline_after`` times in a row is demoted and from then on only probed. Probes are held
-to a budget: they take at most ``probe_share`` of the line's time while there are drives
-to poll, one at a time, the longest-waiting first, so many absent drives never fall due
-together and starve the present ones. Each absent drive still gets its probe, at the
-latest after every other absent drive has had one (:func:`probe_period_s`). With nothing
-to poll (every drive absent) the budget does not apply: the line has nothing better to do.
+Polls go round-robin over the drives that answer. A drive that has not answered since the
+line opened (at start, or one that was not answering when the port was lost) is not polled
+as if it were there: it gets one attempt, its ordinary poll sent in the probes' share of the
+line, so the drives that answer keep their poll rate while the absent ones are tried one by
+one, and if it does not answer it is demoted at once. ``offline_after`` counts the misses of
+drives that answered before (since the line opened, or before the port was lost): one lost
+reply does not give up a drive that was there. While nothing on the line has answered yet,
+the drives not heard from are tried in turn, each up to ``offline_after`` times, as there is
+nothing better to do. A demoted drive is only probed. Probes are held to a budget: they take
+at most ``probe_share`` of the line's time while there are drives to poll, one at a time,
+the longest-waiting first, so many absent drives never fall due together and starve the
+present ones. Each absent drive still gets its probe, at the latest after every other absent
+drive has had one (:func:`probe_period_s`). With nothing to poll (every drive absent) the
+budget does not apply: the line has nothing better to do. Only unanswered probes count
+against the budget: an answered one served a drive that is there, so at start the present
+drives are found one after the other at once.
 
 When every drive that was answering falls silent together, it is the line (a cable, the
 adapter, the power) rather than the drives: they are reported offline but probed one after
@@ -52,6 +61,9 @@ class Rotation:
         self._index = {id(slot): i for i, slot in enumerate(slots)}
         self._next_poll = 0
         self._demoted: list[DriveSlot] = []
+        # Not answered since the line opened, not demoted: tried in this order, as probes are.
+        self._untried: dict[int, DriveSlot] = {id(s): s for s in slots if s.online is None}
+        self._heard = False  # some drive answered since the line opened
         self._quick = 0  # demoted drives with quick_probe set
         self._probe_ready_at = -math.inf  # no budgeted probe before this
         self._probe_started = 0.0
@@ -65,6 +77,13 @@ class Rotation:
         count = len(self.slots)
         upcoming = self.slots[self._next_poll % count] if count else None
         kept = {id(slot) for slot in slots}
+        before = {id(slot) for slot in self.slots}
+        # A drive the reload adds is not heard yet: its one attempt in the probes' share, as
+        # at the line's opening, not polls as if present.
+        self._untried = {i: slot for i, slot in self._untried.items() if i in kept}
+        self._untried.update(
+            (id(slot), slot) for slot in slots if id(slot) not in before and slot.online is None
+        )
         self.plan = plan
         self.slots = slots
         self._index = {id(slot): i for i, slot in enumerate(slots)}
@@ -80,22 +99,29 @@ class Rotation:
 
     def peek(self, now: float) -> Choice | None:
         """The poll or probe due now, if any; nothing changes until :meth:`commit`."""
-        slots = self.slots
+        slots, untried = self.slots, self._untried
         count = len(slots)
         poll = None
         for offset in range(count):
             slot = slots[(self._next_poll + offset) % count]
-            if slot.online is not False and slot.deaf_until <= now:
+            if slot.online is not False and slot.deaf_until <= now and id(slot) not in untried:
                 poll = slot
                 break
-        if self._demoted and (poll is None or self._quick or now >= self._probe_ready_at):
+        if (self._demoted or untried) and (
+            poll is None or self._quick or now >= self._probe_ready_at
+        ):
             probe = self._due_probe(now, budgeted=poll is not None)
             if probe is not None:
-                return Choice(StepKind.PROBE, probe)
+                kind = StepKind.POLL if id(probe) in untried else StepKind.PROBE
+                return Choice(kind, probe)
         return None if poll is None else Choice(StepKind.POLL, poll)
 
     def _due_probe(self, now: float, *, budgeted: bool) -> DriveSlot | None:
-        """The demoted drive to probe now: quick ones first, then the longest waiting."""
+        """The drive to probe now: quick ones, then untried ones, then the longest waiting."""
+        if not self._quick and (not budgeted or now >= self._probe_ready_at):
+            for slot in self._untried.values():  # in the line's order
+                if slot.deaf_until <= now:
+                    return slot
         best: DriveSlot | None = None
         for slot in self._demoted:
             if slot.next_probe_at > now or slot.deaf_until > now:
@@ -112,6 +138,10 @@ class Rotation:
     def commit(self, choice: Choice, now: float) -> None:
         """The chosen poll or probe goes on the wire now."""
         slot = choice.slot
+        if id(slot) in self._untried:  # its one attempt, in the probes' share
+            self._probe_started = now
+            self._probe_budgeted = True
+            return
         if choice.kind is StepKind.POLL:
             self._next_poll = (self._index[id(slot)] + 1) % len(self.slots)
             return
@@ -134,10 +164,13 @@ class Rotation:
     def heard(self, slot: DriveSlot, kind: StepKind | None, now: float, report: Report) -> None:
         """``slot`` answered (``kind``: the step's, None for a command's)."""
         slot.failures = 0
+        self._heard = True
         self._streak.clear()
         self._answered_before_down.clear()
-        if kind is StepKind.PROBE:
-            self._probe_ended(now, tail_s=0.0)
+        tried = self._untried.pop(id(slot), None) is not None and kind is not None
+        if kind is StepKind.PROBE or tried:
+            # It served a drive that is there: not charged to the probes' share.
+            self._probe_budgeted = False
         if self.silent:
             self.silent = False
             report.line_silent = False
@@ -156,6 +189,15 @@ class Rotation:
         """``slot`` did not answer; ``tail_s``: the line time still to pass (a late reply)."""
         slot.failures += 1
         self._streak.add(id(slot))
+        if self._untried.pop(id(slot), None) is not None:
+            if kind is not None:
+                self._probe_ended(now, tail_s)
+            if not self._heard and slot.failures < self.plan.offline_after:
+                self._untried[id(slot)] = slot  # nothing answers yet: the others' turn first
+                return
+            # Not answered since the line opened, and tried: absent until a probe finds it.
+            self._demote(slot, now, report, quick=False)
+            return
         if kind is StepKind.PROBE:
             self._probe_ended(now, tail_s)
             if slot.quick_probe and not self.silent:
@@ -190,8 +232,10 @@ class Rotation:
         the drives that answered before are taken for a silent line, not demoted one by one.
         """
         self.silent = False
+        self._heard = False
         self._streak.clear()
-        self._answered_before_down = {id(s) for s in self.slots if s.online is True}
+        # Kept over reopens with no answer between them: they still answered before.
+        self._answered_before_down.update(id(s) for s in self.slots if s.online is True)
         for slot in self._demoted:
             slot.quick_probe = False
         self._quick = 0

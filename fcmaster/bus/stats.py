@@ -10,6 +10,9 @@ from typing import Any, Final
 LATENCY_BOUNDS: Final = (0.002, 0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.2, 0.5, 1.0)
 # Seconds. The master's own turnaround beyond the protocol's pause.
 TURNAROUND_BOUNDS: Final = (0.00005, 0.0001, 0.0002, 0.0005, 0.001, 0.002, 0.005, 0.01)
+# Seconds. How late a line's timer fired (the end of a pause, a reply's deadline): the event
+# loop's wake-up granularity is 1 ms; a stall (a long collection, a busy loop) shows as more.
+LATENESS_BOUNDS: Final = (0.0001, 0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.5, 1.0)
 
 
 class Histogram:
@@ -47,6 +50,7 @@ class DriveStats:
     timeouts: int = 0
     refused: int = 0
     last_latency_s: float | None = None
+    first_request_at: float | None = None  # the master's first telegram to the drive
 
 
 @dataclass(slots=True)
@@ -72,6 +76,7 @@ class LineStats:
     up_since: float | None = None
     latency: Histogram = field(default_factory=lambda: Histogram(LATENCY_BOUNDS))
     turnaround: Histogram = field(default_factory=lambda: Histogram(TURNAROUND_BOUNDS))
+    wakeup_lateness: Histogram = field(default_factory=lambda: Histogram(LATENESS_BOUNDS))
     drives: dict[str, DriveStats] = field(default_factory=dict)
 
     def utilisation(self, now: float) -> float:
@@ -101,6 +106,7 @@ class LineStats:
             "utilisation": self.utilisation(now),
             "latency_s": self.latency.to_json(),
             "turnaround_s": self.turnaround.to_json(),
+            "wakeup_lateness_s": self.wakeup_lateness.to_json(),
             "drives": {
                 name: {
                     "requests": d.requests,

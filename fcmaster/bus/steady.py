@@ -28,6 +28,7 @@ from collections.abc import Callable
 
 from fcmaster.bus.link import Link
 from fcmaster.bus.planner import Planner, Step, StepKind
+from fcmaster.bus.stats import Histogram
 from fcmaster.clock import Cancellable, Clock
 from fcmaster.protocol.codec import Reply
 
@@ -44,6 +45,7 @@ class SteadyPolling:
         sent: Callable[[Step], None],
         replied: Callable[[Step, Reply], None],
         failed: Callable[[Step], None],
+        lateness: Histogram | None = None,
     ) -> None:
         self._planner = planner
         self._link = link
@@ -51,6 +53,7 @@ class SteadyPolling:
         self._sent, self._replied, self._failed = sent, replied, failed
         self._step: Step | None = None  # the step peeked and not yet done
         self._timer: Cancellable | None = None
+        self._lateness = lateness  # how late the pause's timer fired
         self._ended: asyncio.Future[None] | None = None
 
     @staticmethod
@@ -90,6 +93,8 @@ class SteadyPolling:
 
     def _go(self) -> None:
         """The pause is over: send the peeked step, unless a command came in meanwhile."""
+        if self._timer is not None and self._lateness is not None:  # the timer fired
+            self._lateness.observe(self._clock.now() - self._link.ready_at)
         self._timer = None
         step, ended = self._step, self._ended
         if step is None or ended is None or ended.done():

@@ -10,11 +10,17 @@ demotion, after the line was down: it may have been replaced meanwhile),
 reads like any other, served between polls, so polling keeps its pace — and judges the
 setting against the line's worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
 
-* ``ok`` — the drive stops (ramp or trip) once it hears nothing for longer than a round;
+* ``ok`` — the drive stops (ramp or trip) once it hears nothing for longer than a round,
+  and a gateway restart does not trip it: its timeout covers the restart gap
+  (``restart_gap_s``: from the daemon's start until its first telegram to the drive, which
+  the drive answered then or, powered off meanwhile, later) and a round after it (the first
+  telegram of an adopted drive marks its control word not valid; the valid one follows
+  within a round);
 * ``off`` — it keeps running if the gateway dies (watchdog off, or an action such as
   FC's freeze output that leaves the motor turning);
 * ``too_short`` — the timeout is shorter than a round, so normal polling trips it
-  (Mitsubishi Pr.122 = 0 counts so: it trips as soon as the link commands);
+  (Mitsubishi Pr.122 = 0 counts so: it trips as soon as the link commands), or shorter than
+  the restart gap and a round, so a gateway restart trips it;
 * ``unknown`` — the reads failed, or the setting's effect cannot be told (FC's set-up
   switch).
 
@@ -48,7 +54,7 @@ import asyncio
 import enum
 import math
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, Final
 
@@ -58,6 +64,7 @@ from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.master import BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, WatchdogPlan
 from fcmaster.bus.poll_round import poll_round_s
+from fcmaster.bus.stats import LineStats
 from fcmaster.clock import Clock
 from fcmaster.protocol.codec import Reply
 from fcmaster.protocol.drive import ControlIntent
@@ -96,24 +103,42 @@ class Verdict(enum.StrEnum):
 
 @dataclass(slots=True, frozen=True)
 class WatchdogReport:
-    """A drive's watchdog as last read, and the verdict on it."""
+    """A drive's watchdog as last read, and the verdict on it.
+
+    ``restart_gap_s`` is what the daemon's start cost the drive (None: not measured); it is
+    context for the verdict, not part of what the drive reported, so it does not take part
+    in comparisons.
+    """
 
     timeout_s: float | None
     action: str
     verdict: Verdict
+    restart_gap_s: float | None = field(default=None, compare=False)
 
     def to_json(self) -> dict[str, Any]:
-        """``{"timeout_s", "action", "verdict"}``."""
-        return {"timeout_s": self.timeout_s, "action": self.action, "verdict": self.verdict.value}
+        """``{"timeout_s", "action", "verdict"}``, and ``restart_gap_s`` once measured."""
+        out: dict[str, Any] = {
+            "timeout_s": self.timeout_s,
+            "action": self.action,
+            "verdict": self.verdict.value,
+        }
+        if self.restart_gap_s is not None:
+            out["restart_gap_s"] = self.restart_gap_s
+        return out
 
 
-def judge(setting: WatchdogSetting, round_s: float) -> Verdict:
-    """The verdict on ``setting`` for a line whose worst-case poll round is ``round_s``."""
+def judge(setting: WatchdogSetting, round_s: float, restart_gap_s: float = 0.0) -> Verdict:
+    """The verdict on ``setting`` for a line whose worst-case poll round is ``round_s``.
+
+    ``restart_gap_s``: how long the daemon's start took to reach the drive; a timeout that
+    does not cover it and a round after it (the first valid control word) trips the drive at
+    every gateway restart.
+    """
     if setting.stops is False or setting.timeout_s is None:
         return Verdict.OFF
     if setting.stops is None:
         return Verdict.UNKNOWN
-    if setting.timeout_s < round_s:
+    if setting.timeout_s < restart_gap_s + round_s:
         return Verdict.TOO_SHORT
     return Verdict.OK
 
@@ -137,9 +162,14 @@ class WatchdogAudit:
         *,
         clock: Clock,
         report: Callable[[str, str, WatchdogReport], None],
+        started_at: float | None = None,
     ) -> None:
         self.plan = plan
         self._clock = clock
+        # the daemon's start (default: now); each drive's first answer since, less this
+        self.started_at = clock.now() if started_at is None else started_at
+        self.restart_gaps: dict[str, float] = {}
+        self._stats: LineStats | None = None
         self._turn = asyncio.Lock()  # one audit exchange at a time on the line
         self.facts = spec_for(plan.protocol).watchdog_of(plan)  # Mitsubishi: by drive_port
         self.round_s = poll_round_s(plan)[0] if plan.drives else 0.0
@@ -163,17 +193,29 @@ class WatchdogAudit:
         for name in set(self._tasks) - names:
             self._tasks.pop(name).cancel()
 
-    def attach(self, execute: Execute) -> None:
-        """Send the audit's reads and writes through ``execute`` (the line's BusMaster)."""
+    def attach(self, execute: Execute, stats: LineStats | None = None) -> None:
+        """Send the audit's reads and writes through ``execute`` (the line's BusMaster).
+
+        ``stats``: the line's, where the master notes its first telegram to each drive.
+        """
         self._execute = execute
+        self._stats = stats
 
     def observing(self, inner: BusObserver) -> BusObserver:
         """``inner``, with this audit told when a drive comes online."""
         self._observer = _AuditingObserver(inner, self)
         return self._observer
 
-    def drive_online(self, drive: DrivePlan) -> None:
-        """``drive`` answers again: audit it (again), ending an audit still under way."""
+    def drive_online(self, drive: DrivePlan, at: float | None = None) -> None:
+        """``drive`` answers again (at ``at``): audit it (again), ending one under way."""
+        if at is not None and drive.name not in self.restart_gaps:
+            # The daemon's first telegram to the drive: a drive that answers only later was
+            # not there (powered off), and its watchdog was not running meanwhile.
+            counters = None if self._stats is None else self._stats.drives.get(drive.name)
+            first = None if counters is None else counters.first_request_at
+            self.restart_gaps[drive.name] = max(
+                0.0, (at if first is None else first) - self.started_at
+            )
         self._offline.discard(drive.name)
         if not drive.control or self._execute is None or self._stopped:
             return
@@ -388,17 +430,19 @@ class WatchdogAudit:
         self, drive: DrivePlan, setting: WatchdogSetting | None, problem: str | None
     ) -> None:
         """Report the verdict, and log it: ``off`` and ``too_short`` as warnings, with the fix."""
+        gap = self.restart_gaps.get(drive.name)
         if setting is None:
-            report = WatchdogReport(None, "unknown", Verdict.UNKNOWN)
+            report = WatchdogReport(None, "unknown", Verdict.UNKNOWN, gap)
             self._log.info("drive.watchdog_unknown", drive=drive.name, reason=problem)
             self._warned.pop(drive.name, None)
             self._report(self.plan.name, drive.name, report)
             return
-        verdict = judge(setting, self.round_s)
-        report = WatchdogReport(setting.timeout_s, setting.action, verdict)
+        verdict = judge(setting, self.round_s, gap or 0.0)
+        report = WatchdogReport(setting.timeout_s, setting.action, verdict, gap)
         facts = self._facts(drive)
         round_s = round(self.round_s, 4)
-        suggested = suggested_timeout_s(self.round_s)
+        # with room for a restart like this one: twice its gap
+        suggested = max(suggested_timeout_s(self.round_s), math.ceil((gap or 0.0) * 20) / 10)
         fix = facts.advice(suggested)
         if drive.watchdog is None:
             fix += f", or configure the drive with watchdog: {{timeout_s: {suggested:g}}}"
@@ -408,6 +452,7 @@ class WatchdogAudit:
             "timeout_s": setting.timeout_s,
             "action": setting.action,
             "poll_round_s": round_s,
+            "restart_gap_s": None if gap is None else round(gap, 3),
         }
         if self._warned.get(drive.name) == report:
             # The same again (a drive that comes and goes): said once, not at every return.
@@ -420,10 +465,15 @@ class WatchdogAudit:
                 fix=fix,
             )
         elif verdict is Verdict.TOO_SHORT:
+            restart = setting.timeout_s is not None and setting.timeout_s >= self.round_s
             self._log.warning(
                 "drive.watchdog_too_short",
                 **fields,
-                consequence="normal polling can trip the drive",
+                consequence=(
+                    "a gateway restart trips the drive"
+                    if restart
+                    else "normal polling can trip the drive"
+                ),
                 fix=fix,
             )
         elif verdict is Verdict.UNKNOWN:
@@ -470,7 +520,7 @@ class _AuditingObserver:
         """Pass it on; a drive that came online is audited, one that went offline is not."""
         self._inner.drive_availability(bus, drive, online, at)
         if online:
-            self._audit.drive_online(drive)
+            self._audit.drive_online(drive, at)
         else:
             self._audit.drive_offline(drive)
 

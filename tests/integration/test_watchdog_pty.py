@@ -105,6 +105,9 @@ async def test_verdicts_reach_the_api_and_the_log_and_working_watchdogs_stop_the
             httpx.AsyncClient(base_url=f"http://127.0.0.1:{http_port}", timeout=10) as client,
         ):
             verdicts = await until(lambda: _verdicts(client), "six verdicts", alive=daemon)
+            # what the daemon's start cost each drive: measured, and shorter than any timeout
+            gaps = {name: v.pop("restart_gap_s") for name, v in verdicts.items()}
+            assert all(0.0 < gap < WATCHDOG_S for gap in gaps.values()), gaps
             assert verdicts == {
                 "fc-off": {"timeout_s": None, "action": "off", "verdict": "off"},
                 "fc-short": {"timeout_s": 0.1, "action": "stop", "verdict": "too_short"},

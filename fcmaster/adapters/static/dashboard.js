@@ -312,7 +312,7 @@ function stateParts(d) {
 const WATCHDOG_MEANING = {
   ok: "the drive stops by itself if the gateway dies",
   off: "the motor keeps running if the gateway dies",
-  too_short: "normal polling can trip the drive",
+  too_short: "normal polling or a gateway restart can trip the drive",
   unknown: "what the drive does cannot be told from its settings",
 };
 const VERDICT_WORDS = { ok: "OK", off: "Off", too_short: "Too short", unknown: "Cannot be judged" };
@@ -345,8 +345,12 @@ function watchdogText(d) {
       : "not judged yet: the drive has not answered since the gateway started";
   }
   const timeout = w.timeout_s == null ? "no timeout" : `timeout ${w.timeout_s} s`;
-  const text = `${VERDICT_WORDS[w.verdict] || w.verdict}: ${WATCHDOG_MEANING[w.verdict] || w.verdict} ` +
+  let text = `${VERDICT_WORDS[w.verdict] || w.verdict}: ${WATCHDOG_MEANING[w.verdict] || w.verdict} ` +
     `(${timeout}, action: ${w.action}).`;
+  // what the gateway's start cost the drive: a timeout shorter than this trips it at a restart
+  if (w.restart_gap_s != null) {
+    text += ` Unfed for ${w.restart_gap_s.toFixed(1)} s when the gateway started.`;
+  }
   return (d.online ? text : `${text} As read when the drive was last online.`) + watchdogAdvice(d);
 }
 

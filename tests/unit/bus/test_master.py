@@ -135,14 +135,34 @@ async def test_every_online_drive_polled_in_turn() -> None:
     assert max(counts) - min(counts) <= 1
 
 
+def last_reply_at(b: Bench, name: str) -> float:
+    """When drive ``name`` last answered."""
+    return max(at for who, _, at, _ in b.observer.replies if who == name)
+
+
 async def test_silent_drive_leaves_the_round_once_demoted() -> None:
+    b = bench(A, M, fc=[FcDrive(1), FcDrive(3)], offline_after=2)
+    async with b.master:
+        await b.clock.run_until(T0 + 0.1)
+        b.drives[3].silent = True  # it answered, then fell silent
+        await b.clock.run_until(T0 + 0.6)
+    addresses = [t.address for at, t in b.requests() if at > last_reply_at(b, "m")]
+    assert addresses[:4] == [1, 3, 1, 3]
+    assert set(addresses[4:]) == {1}
+    assert b.observer.availability[-1][:2] == ("m", False)
+
+
+async def test_a_drive_never_heard_gets_one_poll_then_waits_for_its_probe() -> None:
     b = bench(A, M, fc=[FcDrive(1), FcDrive(3, silent=True)], offline_after=2)
     async with b.master:
         await b.clock.run_until(T0 + 0.6)
     addresses = [t.address for _, t in b.requests()]
-    assert addresses[:4] == [1, 3, 1, 3]
-    assert set(addresses[4:]) == {1}
-    assert b.observer.availability[-1][:2] == ("m", False)
+    assert addresses[:2] == [1, 3]
+    assert set(addresses[2:]) == {1}  # its probe is due only after the probe interval
+    assert [(n, online) for n, online, _ in b.observer.availability] == [
+        ("a", True),
+        ("m", False),
+    ]
 
 
 async def test_idle_polls_read_the_monitor_list_in_rotation() -> None:
@@ -746,13 +766,15 @@ async def test_broadcast_is_refused_when_any_drive_is_monitor_only() -> None:
 
 
 async def test_silent_drive_is_demoted_then_probed_only_at_the_probe_interval() -> None:
-    b = bench(A, M, fc=[FcDrive(1), FcDrive(3, silent=True)], probe_interval_s=1.0)
+    b = bench(A, M, fc=[FcDrive(1), FcDrive(3)], probe_interval_s=1.0)
     async with b.master:
-        await b.clock.run_until(T0 + 5.5)
-    to_m = b.requests(3)
+        await b.clock.run_until(T0 + 0.1)
+        b.drives[3].silent = True  # it answered, then fell silent
+        await b.clock.run_until(T0 + 6.0)
+    to_m = [(at, t) for at, t in b.requests(3) if at > last_reply_at(b, "m")]
     polls, probes = to_m[:3], to_m[3:]
     assert {len((t.pke and b"x" * PARAMETER) or b"x" * PROCESS) for _, t in polls} == {PARAMETER}
-    ((name, online, demoted_at),) = b.observer.availability[1:]
+    ((name, online, demoted_at),) = b.observer.availability[2:]
     assert (name, online) == ("m", False)
     assert len(probes) == 5
     assert all(t.pke is None and (t.pcd1, t.pcd2) == (IGNORED, 0) for _, t in probes)

@@ -10,10 +10,12 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+from typing import Any
 
 import pytest
 
 from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.protocol.danfoss_fc import decode_telegram
 from fcmaster.subcommands.daemon import longest_probe_wait_s
 from tests.unit.bus.bench import (
     DELAY_S,
@@ -35,10 +37,10 @@ def approx(value: float) -> object:
     return pytest.approx(value, abs=1e-9)
 
 
-def fleet(configured: int, present: int, probe_interval_s: float = 5.0) -> Bench:
+def fleet(configured: int, present: int, probe_interval_s: float = 5.0, **options: Any) -> Bench:
     drives = [DrivePlan(name=f"d{a}", address=a) for a in range(1, configured + 1)]
     fc = [FcDrive(a, silent=a > present) for a in range(1, configured + 1)]
-    return bench(*drives, fc=fc, probe_interval_s=probe_interval_s)
+    return bench(*drives, fc=fc, probe_interval_s=probe_interval_s, **options)
 
 
 def probe_cost(b: Bench) -> float:
@@ -160,3 +162,94 @@ async def test_a_line_silent_after_its_port_came_back_is_a_line_fault_too() -> N
     returned = [at for _, online, at in b.observer.availability if online and at > back_at]
     assert len(returned) == 4
     assert max(returned) - back_at <= probe_cost(b) + 4 * (exchange_s(PROCESS, PROCESS) + PAUSE_S)
+
+
+def answered_polls(b: Bench, start: float, end: float) -> dict[int, list[float]]:
+    """When each drive's requests in [start, end) went out, for those that were answered."""
+    answered = {(name, at) for name, _, at, _ in b.observer.replies}
+    sent = b.transport.sent
+    times: dict[int, list[float]] = {}
+    for request in sent:
+        address = decode_telegram(request.data, from_drive=False).address
+        if start <= request.at < end and (f"d{address}", request.reply_at) in answered:
+            times.setdefault(address, []).append(request.at)
+    return times
+
+
+async def all_alive_interval(options: dict[str, Any], span: float = 20.0) -> float:
+    """A present drive's poll interval with only the present drives configured."""
+    alone = fleet(PRESENT, PRESENT, **options)
+    async with alone.master:
+        await alone.clock.run_until(T0 + span)
+    full = answered_polls(alone, T0, T0 + span)
+    return span * PRESENT / sum(len(t) for t in full.values())
+
+
+async def test_from_start_absent_drives_are_tried_in_the_probe_share_not_polled_as_present() -> (
+    None
+):
+    """126 configured, 16 present, a user's timeouts: the present keep their rate from start.
+
+    Each drive not heard from gets one poll, in the probes' share of the line, then waits
+    for its probe; it is not polled as if present until ``offline_after`` misses.
+    """
+    options = {"baudrate": 115200, "timeout_s": 0.1, "retries": 1}
+    span = 20.0
+    alone = fleet(PRESENT, PRESENT, **options)  # the same drives, none absent
+    async with alone.master:
+        await alone.clock.run_until(T0 + span)
+    full = answered_polls(alone, T0, T0 + span)
+    period = span * PRESENT / sum(len(t) for t in full.values())  # a drive's poll interval
+    bound = max(0.5, 3 * period)
+    b = fleet(126, PRESENT, **options)
+    async with b.master:
+        await b.clock.run_until(T0 + span)
+    polled = answered_polls(b, T0, T0 + span)
+    assert set(polled) == set(range(1, PRESENT + 1))
+    for address in range(1, PRESENT + 1):
+        times = [T0, *polled[address], T0 + span]
+        longest = max(after - before for before, after in itertools.pairwise(times))
+        assert longest <= bound, (address, longest, bound)
+    # From the first second, the present drives' answered polls: at least 0.9 of all-alive.
+    assert sum(len(t) for t in polled.values()) >= 0.9 * sum(len(t) for t in full.values())
+    # Every absent drive had its one poll, and was demoted after it.
+    tried = [t.address for _, t in b.requests() if t.address > PRESENT and t.pke is not None]
+    assert sorted(tried) == list(range(PRESENT + 1, PRESENT + 1 + len(tried)))
+    assert len(tried) >= 15
+    assert all(s.online is not True for s in b.master.planner.slots[PRESENT:])
+
+
+async def test_absent_drives_powering_up_one_by_one_are_found_within_the_probes_time() -> None:
+    options = {"baudrate": 115200, "timeout_s": 0.1, "retries": 1}
+    b = fleet(126, PRESENT, **options)
+    wait = longest_probe_wait_s(b.plan)  # the longest an absent drive waits for its probe
+    powered = {20: T0 + 30.0, 60: T0 + 10.0, 126: T0 + 50.0}  # 20 demoted, 60 not yet tried
+    async with b.master:
+        for address, at in sorted(powered.items(), key=lambda item: item[1]):
+            await b.clock.run_until(at)
+            b.drives[address].silent = False
+        await b.clock.run_until(max(powered.values()) + wait + 1.0)
+    online = {name: at for name, up, at in b.observer.availability if up}
+    for address, at in powered.items():
+        found = online[f"d{address}"] - at
+        assert 0 < found <= wait + probe_cost(b), (address, found, wait)
+
+
+async def test_after_a_reopen_the_drives_not_heard_yet_still_wait_for_the_probes_share() -> None:
+    options = {"baudrate": 115200, "timeout_s": 0.1, "retries": 1}
+    b = fleet(126, PRESENT, **options)
+    async with b.master:
+        await b.clock.run_until(T0 + 5.0)  # most absent drives not tried yet
+        untried = sum(s.online is None for s in b.master.planner.slots)
+        assert untried > 90
+        b.transport.lost = True  # the adapter is unplugged and plugged back in
+        await b.clock.run_until(T0 + 25.0)
+        assert b.master.is_up
+    assert [up for up, _, _ in b.observer.lines] == [True, False, True]
+    back = b.observer.lines[2][2]
+    polled = answered_polls(b, back, T0 + 25.0)
+    bound = max(0.5, 3 * await all_alive_interval(options))
+    for address in range(1, PRESENT + 1):
+        times = [back, *polled[address], T0 + 25.0]
+        longest = max(after - before for before, after in itertools.pairwise(times))
+        assert longest <= bound, (address, longest)

@@ -59,7 +59,7 @@ def _bench(
         observer=audit.observing(observer),
         rng=random.Random(1),
     )
-    audit.attach(master.execute)
+    audit.attach(master.execute, master.stats)
     return Bench(clock, transport, master, observer, {d.address: d for d in fc}), reports, audit
 
 
@@ -398,3 +398,60 @@ async def test_the_same_warning_is_given_once_not_at_every_return_of_the_drive()
     assert [r.verdict for _, r in reports] == [Verdict.OFF] * 4  # audited at every return
     events = [e["event"] for e in logs if e["event"].startswith("drive.watchdog_")]
     assert events == ["drive.watchdog_off"] + ["drive.watchdog_unchanged"] * 3
+
+
+# -- what a restart costs ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("timeout_s", "round_s", "gap_s", "verdict"),
+    [
+        (2.0, 0.1, 1.0, Verdict.OK),
+        (2.0, 0.1, 2.5, Verdict.TOO_SHORT),
+        (2.0, 2.5, 1.0, Verdict.TOO_SHORT),
+        (2.0, 1.0, 1.5, Verdict.TOO_SHORT),  # the valid word comes a round after the gap
+    ],
+    ids=["both-fit", "restart-longer", "round-longer", "together-longer"],
+)
+def test_the_verdict_is_ok_only_when_the_round_and_the_restart_gap_both_fit(
+    timeout_s: float, round_s: float, gap_s: float, verdict: Verdict
+) -> None:
+    setting = WatchdogSetting(timeout_s=timeout_s, action="stop", stops=True)
+    assert judge(setting, round_s, gap_s) is verdict
+
+
+async def test_a_timeout_shorter_than_the_restart_gap_is_too_short_and_the_gap_shown() -> None:
+    a = DrivePlan(name="a", address=1, control=True)
+    b, reports, audit = _bench(a, fc=[_drive(1, 20, 2)])  # 2.0 s, stop: ok for the round
+    b.transport.fail_open = True  # the adapter is not there yet when the daemon starts
+    with structlog.testing.capture_logs() as logs:
+        async with b.master:
+            await b.clock.run_until(T0 + 2.5)
+            b.transport.fail_open = False
+            await b.clock.run_until(T0 + 12.0)
+            await audit.aclose()
+    first = b.requests(1)[0][0]
+    assert first > T0 + 2.5
+    ((name, report),) = reports
+    assert (name, report.timeout_s, report.verdict) == ("a", 2.0, Verdict.TOO_SHORT)
+    assert report.restart_gap_s == pytest.approx(first - T0)  # the first telegram to it
+    assert report.to_json()["restart_gap_s"] == report.restart_gap_s
+    warning = next(e for e in logs if e["event"] == "drive.watchdog_too_short")
+    assert warning["consequence"] == "a gateway restart trips the drive"
+    assert warning["restart_gap_s"] == pytest.approx(report.restart_gap_s, abs=1e-3)
+
+
+async def test_a_drive_powered_up_late_is_judged_by_the_first_telegram_it_was_sent() -> None:
+    a = DrivePlan(name="a", address=1, control=True)
+    b, reports, audit = _bench(a, fc=[_drive(1, 10, 2, silent=True)])  # 1.0 s, stop
+    async with b.master:
+        await b.clock.run_until(T0 + 8.0)  # unpowered: its watchdog is not running either
+        b.drives[1].silent = False
+        await b.clock.run_until(T0 + 20.0)
+        await audit.aclose()
+    ((name, report),) = reports
+    assert _first_reply_at(b, "a") > T0 + 8.0
+    assert report.restart_gap_s == pytest.approx(b.requests(1)[0][0] - T0)
+    assert report.restart_gap_s is not None
+    assert report.restart_gap_s < 0.1
+    assert (name, report.verdict) == ("a", Verdict.OK)
