@@ -361,8 +361,8 @@ class FleetState:
             # Nothing but the times: no new snapshot, no event, until someone reads it or the
             # heartbeat is due.
             self._refresh(key, read_at, "output_frequency_hz" in changes, read)
-            if self._clock.now() - self._published[key][1] >= self._heartbeat_s:
-                self._publish(key, self._current(key), drive.nominal_frequency_hz)
+            if at - self._published[key][1] >= self._heartbeat_s:
+                self._publish(key, self._current(key), drive.nominal_frequency_hz, at=at)
             return
         old = self._current(key)
         changes["updated_at"] = read_at
@@ -376,7 +376,7 @@ class FleetState:
         self._states[key] = new
         if not old.online:
             self._emit(AvailabilityChanged(bus=new.bus, drive=new.name, online=True))
-        self._publish(key, new, drive.nominal_frequency_hz, read)
+        self._publish(key, new, drive.nominal_frequency_hz, read, at=at)
 
     def _refresh(self, key: str, read_at: float, frequency: bool, value: str | None) -> None:
         fresh = self._fresh.get(key)
@@ -389,12 +389,23 @@ class FleetState:
             fresh.values_at[value] = read_at
 
     def _publish(
-        self, key: str, new: DriveState, nominal_frequency_hz: float, read: str | None = None
+        self,
+        key: str,
+        new: DriveState,
+        nominal_frequency_hz: float,
+        read: str | None = None,
+        *,
+        at: float | None = None,
     ) -> None:
-        """Emit ``new`` if a subscriber could see a change, or the heartbeat is due."""
+        """Emit ``new`` if a subscriber could see a change, or the heartbeat is due.
+
+        ``at``: when the reading in ``new`` was taken (a reply's arrival), else now. The
+        heartbeat runs on those times, the ones ``updated_at`` shows, so no repeat of an
+        unchanged state carries a time less than a heartbeat after the last one's.
+        """
         sent, sent_at = self._published[key]
         changed = self._changes(sent, new, nominal_frequency_hz, read)
-        now = self._clock.now()
+        now = self._clock.now() if at is None else at
         if changed or now - sent_at >= self._heartbeat_s:
             self._published[key] = (new, now)
             self._emit(DriveUpdated(new, changed))

@@ -251,7 +251,13 @@ def create_app(
         """The daemon: its version and its config (hash, loaded_at, last_reload)."""
         return json_response({"version": __version__, "config": gateway.config_status()})
 
-    @app.get("/api/v1/events", responses=_AUTH_ERRORS)
+    @app.get(
+        "/api/v1/events",
+        responses={
+            **_AUTH_ERRORS,
+            422: {"model": ErrorOut, "description": "A bad since, kind or limit"},
+        },
+    )
     async def events(
         _: Viewer,
         since: str | None = None,

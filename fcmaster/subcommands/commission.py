@@ -174,6 +174,9 @@ def _print_found(
         print(json.dumps(found, indent=2), flush=True)
     elif found:
         for entry in found:
+            if entry["status_word"] is None:  # it answers, but no status word was read
+                print(f"{entry['address']:>4}  answers (no status read: it needs a profile)")
+                continue
             flags = ", ".join(k for k in ("running", "fault", "warning") if entry[k]) or "stopped"
             print(f"{entry['address']:>4}  status 0x{entry['status_word']:04X}  {flags}")
     elif interrupted:

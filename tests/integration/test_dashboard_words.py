@@ -190,7 +190,7 @@ buses:
   - name: encl
     port: sim://encl
     protocol: enc
-    baudrate: 115200
+    baudrate: 38400  # the fastest ENC drives offer
     drives:
       - {{name: enc-mixer, address: 1}}
     simulation:

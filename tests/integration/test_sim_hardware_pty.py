@@ -49,9 +49,10 @@ async def test_replies_held_by_an_adapter_still_arrive() -> None:
 
 
 async def test_fcmaster_sim_serves_an_adapter_latency_and_twins(tmp_path: Path) -> None:
+    twins = ("--addresses", "1,2,2", "--duplicate-addresses", "--adapter-latency-ms", "16")
     name, found = await commissioning.scan_a_served_sim(
         tmp_path,
-        ("--addresses", "1,2,2", "--duplicate-addresses", "--adapter-latency-ms", "16"),
+        (*twins, "--baudrate", "19200"),
         ("--addresses", "1-3", "--baudrate", "19200", "--timeout", "0.1"),
     )
     assert name == "line1"
