@@ -38,7 +38,7 @@ async def test_the_drive_view_shows_the_watchdog_verdicts_of_the_demo(browser: B
     port = free_port()
     async with dashboard(browser, _demo(port), port, demo=True) as (page, problems):
         expected = {  # in words: never a raw token such as "too_short —"
-            "supply-pump-2": "Too short: normal polling can trip the drive "
+            "supply-pump-2": "Too short: normal polling or a gateway restart can trip the drive "
             "(timeout 0.1 s, action: stop and trip).",
             "supply-pump-1": "OK: the drive stops by itself if the gateway dies "
             "(timeout 2 s, action: stop).",

@@ -82,6 +82,9 @@ async def test_watchdog_verdicts_and_commands_of_every_profile(tmp_path: Path) -
             httpx.AsyncClient(base_url=f"http://127.0.0.1:{http}", timeout=15) as client,
         ):
             verdicts = await until(lambda: _verdicts(client), "five verdicts", alive=daemon)
+            # What the daemon's start cost each drive: its first telegram came soon after.
+            gaps = {name: v.pop("restart_gap_s") for name, v in verdicts.items()}
+            assert all(0.0 <= gap < 1.0 for gap in gaps.values()), gaps
             assert verdicts == {
                 # written at adoption over the simulated factory setting (58.14 = no action)
                 "abb": {"timeout_s": 2.5, "action": "fault", "verdict": "ok"},

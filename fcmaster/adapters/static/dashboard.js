@@ -348,7 +348,7 @@ function watchdogText(d) {
   let text = `${VERDICT_WORDS[w.verdict] || w.verdict}: ${WATCHDOG_MEANING[w.verdict] || w.verdict} ` +
     `(${timeout}, action: ${w.action}).`;
   // what the gateway's start cost the drive: a timeout shorter than this trips it at a restart
-  if (w.restart_gap_s != null) {
+  if (w.restart_gap_s != null && w.restart_gap_s >= 0.05) {
     text += ` Unfed for ${w.restart_gap_s.toFixed(1)} s when the gateway started.`;
   }
   return (d.online ? text : `${text} As read when the drive was last online.`) + watchdogAdvice(d);
