@@ -119,7 +119,6 @@ class Service:
         self.config = config
         self.demo = demo
         self.clock = clock or MonotonicClock()
-        self._started_at = self.clock.now()  # run() sets it again: a restart's gaps count from it
         self.hub = Hub()
         self.fleet = FleetState(config.lines, emit=self.hub.publish, clock=self.clock)
         self.journal = Journal(
@@ -282,7 +281,7 @@ class Service:
                 await stack.enter_async_context(self.journal)
                 stack.push_async_callback(self._close_lines)
                 for plan in self.config.lines:
-                    await self.open_line(plan)
+                    await self.open_line(plan, at_start=True)
                 stack.push_async_callback(self._stop_adapters)
                 for section in ADAPTERS:
                     await self.start_adapter(section)
@@ -321,8 +320,12 @@ class Service:
             health.thaw()  # what was frozen may go now (a process that serves again)
         log.info("service.stopped")
 
-    async def open_line(self, plan: LinePlan) -> None:
-        """Start serving line ``plan`` (at start, or a line a reload adds or reopens)."""
+    async def open_line(self, plan: LinePlan, *, at_start: bool = False) -> None:
+        """Start serving line ``plan`` (at start, or a line a reload adds or reopens).
+
+        The watchdog audit counts what taking the drives over cost them from the daemon's
+        start (``at_start``), or from now: a line a reload opens was not fed by anyone before.
+        """
         stack = AsyncExitStack()
         self._line_stacks[plan.name] = stack
         # Each commanded drive's own watchdog is read and judged when it comes online
@@ -331,7 +334,7 @@ class Service:
             plan,
             clock=self.clock,
             report=self.fleet.drive_watchdog,
-            started_at=self._started_at,
+            started_at=self._started_at if at_start else None,
         )
         master = BusMaster(
             plan,

@@ -166,9 +166,11 @@ class WatchdogAudit:
     ) -> None:
         self.plan = plan
         self._clock = clock
-        # the daemon's start (default: now); each drive's first answer since, less this
+        # the daemon's start (default: now); each drive's first telegram since, less this
         self.started_at = clock.now() if started_at is None else started_at
         self.restart_gaps: dict[str, float] = {}
+        # drives a reload added: the gap runs from then, not from the daemon's start
+        self._taken_at: dict[str, float] = {}
         self._stats: LineStats | None = None
         self._turn = asyncio.Lock()  # one audit exchange at a time on the line
         self.facts = spec_for(plan.protocol).watchdog_of(plan)  # Mitsubishi: by drive_port
@@ -187,11 +189,18 @@ class WatchdogAudit:
 
     def replan(self, plan: LinePlan) -> None:
         """The line's drives are now ``plan``'s (a reload): audits of drives it left end."""
+        before = {drive.name for drive in self.plan.drives}
         self.plan = plan
         self.round_s = poll_round_s(plan)[0] if plan.drives else 0.0
         names = {drive.name for drive in plan.drives}
         for name in set(self._tasks) - names:
             self._tasks.pop(name).cancel()
+        for name in before - names:  # one added again later is taken over anew
+            self.restart_gaps.pop(name, None)
+            self._taken_at.pop(name, None)
+        now = self._clock.now()
+        for name in names - before:
+            self._taken_at[name] = now
 
     def attach(self, execute: Execute, stats: LineStats | None = None) -> None:
         """Send the audit's reads and writes through ``execute`` (the line's BusMaster).
@@ -213,9 +222,8 @@ class WatchdogAudit:
             # not there (powered off), and its watchdog was not running meanwhile.
             counters = None if self._stats is None else self._stats.drives.get(drive.name)
             first = None if counters is None else counters.first_request_at
-            self.restart_gaps[drive.name] = max(
-                0.0, (at if first is None else first) - self.started_at
-            )
+            since = self._taken_at.get(drive.name, self.started_at)
+            self.restart_gaps[drive.name] = max(0.0, (at if first is None else first) - since)
         self._offline.discard(drive.name)
         if not drive.control or self._execute is None or self._stopped:
             return
