@@ -39,7 +39,7 @@ class Cancellable(Protocol):
 class Clock(Protocol):
     """Monotonic time in float seconds, and waiting on it: by a task, or by a callback.
 
-    The callbacks are what a line's runner is made of (:mod:`fcmaster.bus.steady`, the
+    The callbacks are what a line's runner is made of (:mod:`fcmaster.bus.runner`, the
     transports' receivers): a virtual clock calls them in virtual time exactly as the real
     one calls them on the event loop, so the path a real port runs is the path the
     virtual-time tests run.

@@ -8,26 +8,20 @@ frames and noise are counted and the read goes on. After a timeout it lets the l
 for a reply's length, so a late reply is discarded before the next request instead of
 being taken for its answer. An inter-character gap gives up an unfinished frame.
 
-The deadline for a reply follows the line. Until it has timed a few replies it is the
-plan's conservative one (wire time, response delay and a 50 ms margin); then it is the wire
-time, the drive's response delay (or the answer time measured, if longer) and a margin of
-four times the measured spread of answer times (rising fast, falling slowly, and counting
-replies that came after their deadline), as TCP sets its retransmission timeout, but at
-least the answer time once more, so a lost
-reply costs about two transactions instead of a fixed margin. That is for polls and probes;
-a command's exchange keeps the fixed deadline, since a drive may take longer over some
-(storing a parameter) and a late answer must not turn a command that was carried out into
-a timeout. ``timeout_s`` in the config overrides both.
+The deadline for a reply follows the line (:mod:`~fcmaster.bus.answer_times`) for polls and
+probes; a command's exchange keeps the plan's fixed deadline, since a drive may take longer
+over some (storing a parameter) and a late answer must not turn a command that was carried
+out into a timeout. ``timeout_s`` in the config overrides both.
 
 A reply is taken in the transport's reader callback (:meth:`Link.watch`), once whole, and
-:meth:`Link.send_now` writes from a callback: the BusMaster's steady polling chains
-exchanges that way. :meth:`Link.send` and :meth:`Link.receive` are the same steps for a
-task, and receive waits on the same watch: every transport a line runs on has these
-callback powers (:class:`~fcmaster.transport.pipe.Framing`), so there is one way a reply is
-read, on a real port and in the virtual-time tests alike.
+:meth:`Link.send_now` writes from a callback: a line's runner chains exchanges that way
+(:mod:`~fcmaster.bus.runner`). :meth:`Link.send` and :meth:`Link.receive` are the same
+steps for a task, and receive waits on the same watch: every transport a line runs on has
+these callback powers (:class:`~fcmaster.transport.pipe.Framing`), so there is one way a
+reply is read, on a real port and in the virtual-time tests alike.
 
-The BusMaster drives a Link from its planner; the commissioning commands (scan, status,
-read, write, control) drive one directly.
+The BusMaster's runner drives a Link from its planner; the commissioning commands (scan,
+status, read, write, control) drive one directly, as a task.
 """
 
 from __future__ import annotations
@@ -36,6 +30,7 @@ import asyncio
 from collections.abc import Callable
 from functools import partial
 
+from fcmaster.bus.answer_times import AnswerTimes
 from fcmaster.bus.frame_log import RX, TX, FrameLog
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.stats import LineStats
@@ -45,7 +40,6 @@ from fcmaster.protocol.codec import DriveCodec, Exchange, Reply
 from fcmaster.protocol.framing import Frame, Framer, Skipped, SkipReason
 from fcmaster.transport.pipe import Transport
 
-ANSWER_SAMPLES = 8  # replies timed before deadlines follow the line
 RECORDED = 32  # frames and events the flight recorder keeps
 PARSED_LIMIT = 4096  # requests whose last reply is kept (see Link._parse)
 
@@ -103,10 +97,8 @@ class Link:
         self._gap = 0.0
         self._done: Answered | None = None
         self._replied_at: float | None = None
-        # How long replies take beyond their wire time: smoothed mean and mean deviation.
-        self._answer_s = 0.0
-        self._answer_dev_s = 0.0
-        self._answers = 0
+        self._answer_times = AnswerTimes(plan)  # how long replies take beyond their wire time
+        self._timed = self._answer_times.timed
         self._missed: tuple[float, float] | None = None  # the last request timed out: when, wire
         self._suspect: tuple[float, float] | None = None  # the one before, its reply not seen
 
@@ -127,32 +119,8 @@ class Link:
         return latency_ms / 1000 + self._plan_gap_s
 
     def deadline_s(self, request_length: int, reply_length: int) -> float:
-        """Seconds from writing a request to giving up on its reply."""
-        plan = self.plan
-        fixed = plan.reply_timeout(request_length, reply_length)
-        if plan.timeout_s is not None or self._answers < ANSWER_SAMPLES:
-            return fixed
-        wire = plan.wire_s(request_length + reply_length)
-        answer = max(plan.response_delay_s, self._answer_s)
-        # The margin is at least the answer time itself: a host's scheduling hiccup or an
-        # adapter's latency timer can delay a reply by that much without the spread having
-        # shown it yet.
-        margin = max(4.0 * self._answer_dev_s, self._answer_s, self._plan_gap_s)
-        return min(fixed, wire + answer + margin)
-
-    def _timed(self, answer_s: float) -> None:
-        """Fold one reply's answer time (its latency beyond the wire time) into the estimate."""
-        if self._answers == 0:
-            self._answer_s, self._answer_dev_s = answer_s, answer_s / 2
-        else:
-            # The spread rises fast and falls slowly: one slow answer (a loaded host, a USB
-            # adapter's latency timer) keeps the margin wide for a while.
-            error = abs(answer_s - self._answer_s)
-            self._answer_dev_s += (error - self._answer_dev_s) / (
-                4 if error > self._answer_dev_s else 16
-            )
-            self._answer_s += (answer_s - self._answer_s) / 8
-        self._answers += 1
+        """Seconds from writing a request to giving up on its reply (see answer_times)."""
+        return self._answer_times.deadline_s(request_length, reply_length)
 
     async def send(self, exchange: Exchange) -> None:
         """Wait for the line to be free, drop stale input, and write the request."""

@@ -1,15 +1,16 @@
-"""BusMaster: the one asyncio task that owns a half-duplex line.
+"""BusMaster: owns a half-duplex line, its port, its supervision and its commands.
 
 Theory of operation
 -------------------
-One transaction is in flight at any time. The loop asks the :class:`Planner` for a step
-and carries it over a :class:`~fcmaster.bus.link.Link`, which owns the wire discipline:
+One transaction is in flight at any time. The :class:`~fcmaster.bus.runner.LineRunner`
+asks the :class:`Planner` for a step and carries it over a
+:class:`~fcmaster.bus.link.Link`, which owns the wire discipline:
 the pause after the previous reply, dropping stale input, one-burst writes, reading until a
 frame answers the request or the deadline passes, and draining after a timeout so a late
 reply is never taken for the next one.
 
 The turnaround between a reply and the next request is the master's whole overhead, so the
-loop does there only what decides the next request: decode, planner update, encode. Drive
+runner does there only what decides the next request: decode, planner update, encode. Drive
 updates for the layers above are handed on right *after* the next request is written, while
 it is on the wire. Command results are resolved at once.
 
@@ -17,11 +18,11 @@ The pause is counted from the reply's arrival, so the work inside it is free; th
 sleep must be precise for this to hold (see :mod:`fcmaster.clock`). A command that arrives
 during the pause still goes first: the step chosen before it is chosen again, and a command
 chosen before the pause that ended meanwhile (cancelled at shutdown, superseded by a stop)
-is never sent. Runs of polls and probes are carried in callbacks instead of by this loop,
-on every transport (a serial port, the simulator's line, the virtual-time tests' scripted
-line) (:mod:`~fcmaster.bus.steady`), with the same steps and
-the same rules; what the line tells the layers above goes through
-:mod:`~fcmaster.bus.reporting`.
+is never sent. Every step is carried in callbacks, on every transport (a serial port, the
+simulator's line, the virtual-time tests' scripted line): one driver, so the path a real
+port runs all day is the path the tests run. This class's task only opens the port, runs
+the runner until the line fails, and reopens; what the line tells the layers above goes
+through :mod:`~fcmaster.bus.reporting`.
 
 A port that fails (adapter unplugged, server gone) takes the line down: queued commands end
 ``cancelled`` with the reason, and the port is reopened with jittered exponential backoff
@@ -51,10 +52,10 @@ from fcmaster.bus.link import Link
 from fcmaster.bus.observer import BusObserver as BusObserver
 from fcmaster.bus.observer import NullObserver
 from fcmaster.bus.plan import LinePlan
-from fcmaster.bus.planner import Completion, Planner, Step, StepKind
+from fcmaster.bus.planner import Completion, Planner, Step
 from fcmaster.bus.reporting import LineReporter
+from fcmaster.bus.runner import LineRunner
 from fcmaster.bus.stats import DriveStats, LineStats
-from fcmaster.bus.steady import SteadyPolling
 from fcmaster.clock import Clock
 from fcmaster.errors import (
     PortError,
@@ -88,19 +89,21 @@ class BusMaster:
         self._transport = transport
         self._clock = clock
         self._link = Link(plan, codec=codec, transport=transport, clock=clock, stats=self.stats)
-        # Polls run in callbacks: see steady.py.
-        self._steady = SteadyPolling(
+        # Every step runs in callbacks: see runner.py.
+        self._runner = LineRunner(
             self.planner,
             self._link,
             clock,
+            between=self._between,
+            idle=self._idle,
             sent=self._sent,
             replied=self._replied,
             failed=self._failed,
+            broadcast=self._broadcast,
             lateness=self.stats.wakeup_lateness,
         )
         self._observer: BusObserver = observer or NullObserver()
         self._rng = rng or random.Random()
-        self._wake = asyncio.Event()
         self._tried = asyncio.Event()  # the port has been tried once since __aenter__
         self._task: asyncio.Task[None] | None = None
         self._up = False
@@ -188,7 +191,7 @@ class BusMaster:
             )
         else:
             self._report.resolve(self.planner.submit(name, command, future))
-            self._wake.set()
+            self._runner.wake()
         return await future
 
     async def reconfigure(self, plan: LinePlan) -> None:
@@ -203,7 +206,7 @@ class BusMaster:
         self._replans.append((plan, done))
         if self._serving:
             self.planner.held = True  # a step chosen before this is chosen again after it
-            self._wake.set()
+            self._runner.wake()
         else:
             self._replan()
         await done
@@ -333,51 +336,20 @@ class BusMaster:
     async def _serve(self) -> None:
         self._serving = True
         try:
-            await self._serve_steps()
+            await self._runner.run()  # every step in callbacks, until the line fails
         finally:
             self._serving = False
             if self._replans:  # the line is lost or closing: nothing is on the wire now
                 self._replan()
 
-    async def _serve_steps(self) -> None:
-        clock, link, planner, steady = self._clock, self._link, self.planner, self._steady
-        while True:
-            if self._replans:
-                self._replan()
-            now = clock.now()
-            step = planner.peek(now)
-            if step is None:
-                self._report.flush()
-                await self._idle(planner.next_wakeup(now))
-                continue
-            if steady.carries(step):
-                await steady.run(step)  # polls in callbacks, until another kind of step
-                continue
-            ready_at = link.ready_at
-            if ready_at > now:
-                # The next step was chosen (and encoded) inside the pause, where it is free.
-                await clock.sleep_until(ready_at)
-                if not planner.still_next(step):
-                    # A command came in meanwhile (it may go first, or supersede or replace
-                    # this one), or this one ended (cancelled at shutdown): choose again.
-                    continue
-                now = clock.now()
-                self.stats.wakeup_lateness.observe(now - ready_at)
-            else:
-                now = clock.now()
-            planner.commit(step, now)
-            exchange = step.exchange
-            await link.send(exchange)
-            self._sent(step)
-            if not exchange.expects_reply:
-                self._report.handle(planner.on_sent(step, clock.now()))
-                continue
-            # Commands wait the plan's fixed deadline: see Link.
-            reply = await link.receive(exchange, adaptive=step.kind is not StepKind.COMMAND)
-            if reply is None:
-                self._failed(step)
-            else:
-                self._replied(step, reply)
+    def _between(self) -> None:
+        """Between two exchanges: the plans :meth:`reconfigure` was given apply now."""
+        if self._replans:
+            self._replan()
+
+    def _idle(self) -> None:
+        """Nothing to send until a command or a probe's time: the layers above catch up."""
+        self._report.flush()
 
     def _sent(self, step: Step) -> None:
         """``step``'s request is on the wire."""
@@ -394,28 +366,16 @@ class BusMaster:
             replied = self._observer.drive_replied
             self._report.defer(partial(replied, self.plan.name, slot.plan, reply, now, slot.intent))
 
+    def _broadcast(self, step: Step) -> None:
+        """``step``'s request, which gets no answer, is on the wire."""
+        self._report.handle(self.planner.on_sent(step, self._clock.now()))
+
     def _failed(self, step: Step) -> None:
         """``step`` got no valid reply before its deadline."""
         self._report.count_failure(step)
         self._report.handle(
             self.planner.on_failure(step, self._clock.now(), self._report.timeout_reason(step))
         )
-
-    async def _idle(self, wakeup: float | None) -> None:
-        """Nothing to send: wait for a command, or for the next probe to fall due."""
-        self._wake.clear()
-        waiter = asyncio.ensure_future(self._wake.wait())
-        try:
-            if wakeup is None:
-                await waiter
-                return
-            sleeper = asyncio.ensure_future(self._clock.sleep_until(wakeup))
-            try:
-                await asyncio.wait((waiter, sleeper), return_when=asyncio.FIRST_COMPLETED)
-            finally:
-                sleeper.cancel()
-        finally:
-            waiter.cancel()
 
     @property
     def frames(self) -> FrameLog:

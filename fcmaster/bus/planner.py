@@ -40,12 +40,6 @@ repeated: the drive is adopted again from its next good status. Reverting would 
 motor (a start applied, its replies lost, then a stop). A trip (status fault rising) turns
 the intent into a stop, so a later reset does not restart the motor; a new start is needed.
 
-A command may take several exchanges (a Mitsubishi run is a frequency write and a run
-command; its parameter access selects the parameter page first). They go one after the
-other; a refusal of any of them ends the command with that refusal, and otherwise the last
-one's reply is the command's result. A parameter access that fails part-way is retried from
-its first exchange, since what the earlier ones selected in the drive may be gone.
-
 A drive that restarts on a request (an exchange with ``deaf_s``: the Mitsubishi inverter
 reset) gets no reply to wait for and hears nothing for a while: the planner sends it
 nothing, polls included, until ``deaf_s`` has passed, while the other drives go on being
@@ -63,9 +57,11 @@ The planner puts together parts with an interface each: the message types
 (:mod:`~fcmaster.bus.steps`), admission (:mod:`~fcmaster.bus.admission`: what is refused
 before it is queued), queue discipline (:mod:`~fcmaster.bus.queue`), polls, probes and
 liveness (:mod:`~fcmaster.bus.rotation`), the control-intent algebra
-(:mod:`~fcmaster.bus.intents`) and the commands waiting for confirmation
-(:mod:`~fcmaster.bus.unconfirmed`). What is left here is a command's way through its exchanges
-and what each reply or failure means for it.
+(:mod:`~fcmaster.bus.intents`), a command's way through its exchanges, one after the other
+(:mod:`~fcmaster.bus.progress`), what a reply says about its drive
+(:mod:`~fcmaster.bus.hearing`) and the commands waiting for confirmation
+(:mod:`~fcmaster.bus.unconfirmed`). What is left here is choosing the next step and what a
+failure means for its drive.
 """
 
 from __future__ import annotations
@@ -73,22 +69,16 @@ from __future__ import annotations
 import dataclasses
 
 from fcmaster.bus import admission
-from fcmaster.bus.adoption import Adoption, not_adopted
-from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
-from fcmaster.bus.confirm import LOCAL, needs_confirmation, note_ramp, ramp_keys
+from fcmaster.bus.commands import Action, Command
+from fcmaster.bus.hearing import Hearing
 from fcmaster.bus.intents import (
-    apply,
-    current,
     forget,
-    learn,
-    learning_read,
-    needs_learning,
     restarted,
     stopping_only,
-    unknown,
     without_reset,
 )
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
+from fcmaster.bus.progress import Progress
 from fcmaster.bus.queue import CommandQueue
 from fcmaster.bus.rotation import Choice, Rotation
 from fcmaster.bus.steps import (
@@ -100,8 +90,6 @@ from fcmaster.bus.steps import (
     Step,
     StepKind,
     Transition,
-    completion_of,
-    result_of,
 )
 from fcmaster.bus.unconfirmed import Confirmations
 from fcmaster.protocol.codec import DriveCodec, Exchange, ParameterKey, Reply
@@ -132,8 +120,8 @@ class Planner:
         self.rotation = Rotation(plan, self.slots)
         self._in_flight: Pending | None = None  # the command whose step is on the wire
         self._confirming = Confirmations()  # acknowledged, waiting for the status to show it
-        self._ramp_keys = ramp_keys(codec)  # read from each bus-controlled drive once online
-        self._adoption = Adoption(codec)
+        self._hearing = Hearing(codec, self.rotation, self._confirming)
+        self._progress = Progress(codec, self._queue, self._confirming, self._targets)
         self._peeked: Step | None = None  # the step peek chose, until it is committed
         self.held = False  # nothing more is sent until the master has reconfigured the line
 
@@ -274,7 +262,7 @@ class Planner:
         """
         pending = self._next_command(now) if self._queue else None
         if pending is not None:
-            step = self._command_step(pending)
+            step = self._progress.step(pending)
         else:
             choice = self.rotation.peek(now)
             if choice is None:
@@ -346,27 +334,6 @@ class Planner:
             read = slot.sequence[slot.cursor % len(slot.sequence)]
         return self.codec.poll(slot.address, slot.intent, read)
 
-    def _command_step(self, pending: Pending) -> Step:
-        slot, command = pending.slot, pending.command
-        if command.action.is_control:
-            if slot is not None and needs_learning(slot, pending):
-                # Learn what the drive is doing before changing part of it: the status
-                # first, then (for protocols that report the output apart from the status,
-                # such as Mitsubishi) the items of the drive's monitor list in turn.
-                exchange = self.codec.poll(slot.address, None, learning_read(slot, pending))
-                return Step(StepKind.COMMAND, exchange, slot, pending)
-            if pending.intent is None:
-                base = ControlIntent() if slot is None else current(slot)
-                pending.intent = apply(base, command)
-            exchanges = self.codec.control(0 if slot is None else slot.address, pending.intent)
-            exchange = exchanges[pending.part]
-        else:
-            assert slot is not None  # access commands always name a drive
-            if not pending.access:
-                pending.access = admission.build_access(self.codec, slot, command)
-            exchange = pending.access[pending.part]
-        return Step(StepKind.COMMAND, exchange, slot, pending)
-
     def _targets(self, slot: DriveSlot | None) -> list[DriveSlot]:
         return [slot] if slot is not None else [s for s in self.slots if s.plan.control]
 
@@ -377,7 +344,7 @@ class Planner:
         report = Report()
         self._in_flight = None
         if step.pending is not None:
-            self._advance(step.pending, report, None, now)
+            self._progress.advance(step.pending, report, None, now)
         if self._confirming:
             self._confirming.expire(now, report)
         deaf_s = step.exchange.deaf_s
@@ -391,9 +358,9 @@ class Planner:
         report = Report()
         self._in_flight = None
         slot = step.slot
-        tripped = slot is not None and self._heard(slot, step, reply, now, report)
+        tripped = slot is not None and self._hearing.heard(slot, step, reply, now, report)
         if step.pending is not None:
-            self._advance(step.pending, report, reply, now)
+            self._progress.advance(step.pending, report, reply, now)
         if tripped and slot is not None and slot.intent is not None:
             # After the command's own intent: a trip in the reply to a start still stops.
             slot.intent = dataclasses.replace(slot.intent, motion=Motion.STOP)
@@ -406,21 +373,12 @@ class Planner:
         report = Report()
         self._in_flight = None
         slot = step.slot
-        if step.kind is StepKind.COMMAND and step.pending is not None:
-            pending = step.pending
-            pending.attempts += 1
-            if pending.access:
-                pending.part = 0  # again from the start: what a first exchange selected may be gone
-            if pending.attempts <= self.plan.retries:
-                return report  # stays at the head of its queue: retried next
-            sent = pending.phase is Phase.SENDING
-            self._finish(pending, report, result_of(Outcome.TIMEOUT, reason))
-            action = pending.command.action
-            if sent and action.is_control and not action.is_urgent:
-                # The drive may or may not have applied it: adopt it again from its next
-                # good status. A stop that timed out is kept (it holds from being sent).
-                for target in self._targets(slot):
-                    unknown(target)
+        pending = step.pending
+        retried = pending is not None and not self._progress.failed(
+            pending, report, reason, self.plan.retries
+        )
+        if retried:
+            return report  # stays at the head of its queue: retried next
         if slot is not None:
             kind = None if step.kind is StepKind.COMMAND else step.kind
             # After the deadline a late reply may still be arriving: the line is not free.
@@ -435,114 +393,6 @@ class Planner:
         if self._confirming:
             self._confirming.expire(now, report)
         return report
-
-    def _heard(self, slot: DriveSlot, step: Step, reply: Reply, now: float, report: Report) -> bool:
-        """Take in what ``reply`` says about its drive; whether it shows a new trip."""
-        kind = None if step.kind is StepKind.COMMAND else step.kind
-        self.rotation.heard(slot, kind, now, report)
-        learn(slot, reply)
-        if slot.plan.control:
-            self._adoption.heard(slot, reply, step.exchange.parameter)
-        keys = self._ramp_keys
-        if keys is not None and slot.plan.control:
-            if not slot.ramps_asked:
-                slot.ramps_asked = True
-                slot.urgent_reads.extend(keys)
-            if reply.value is not None:
-                note_ramp(slot, keys, reply)
-        conditions = reply.conditions
-        if conditions is not None and conditions.kind == "alarm":
-            slot.alarms[conditions.source] = tuple(c.text for c in conditions.active)
-            slot.alarms_read = True
-        status = reply.status
-        if status is None:
-            if slot.confirming and conditions is not None:
-                self._confirming.judge(slot, now, report)
-            return False
-        alarms_changed = status.fault != slot.fault
-        warnings_changed = status.warning != slot.warning
-        tripped = status.fault and not slot.fault
-        slot.fault, slot.warning = status.fault, status.warning
-        slot.local, slot.status_word = not status.accepts_bus_control, status.word
-        if tripped:
-            slot.alarms_read = False  # which alarm it is comes with the next read of its word
-        if slot.confirming:
-            self._confirming.judge(slot, now, report)
-        if alarms_changed or warnings_changed:
-            for key in self.codec.condition_parameters(
-                alarms=alarms_changed, warnings=warnings_changed
-            ):
-                if key not in slot.urgent_reads:
-                    slot.urgent_reads.append(key)
-        return tripped
-
-    def _advance(self, pending: Pending, report: Report, reply: Reply | None, now: float) -> None:
-        command = pending.command
-        if reply is not None and reply.error is not None:
-            self._finish(
-                pending,
-                report,
-                CommandResult(
-                    outcome=Outcome.REFUSED,
-                    error=reply.error,
-                    reason=f"the drive refused: {reply.error.text} (error {reply.error.code})",
-                ),
-            )
-            return
-        if command.action.is_control:
-            if pending.phase is Phase.LEARNING:
-                pending.attempts = 0  # that was a state-learning poll; now the command
-                pending.learned += 1
-                slot = pending.slot
-                if (
-                    slot is not None
-                    and slot.intent is None
-                    and pending.learned > len(slot.sequence) + 1
-                ):
-                    # A whole rotation answered and still not adoptable: do not poll forever.
-                    self._finish(
-                        pending,
-                        report,
-                        result_of(
-                            Outcome.TIMEOUT,
-                            f"{slot.name}'s state could not be learned ({not_adopted(slot)})",
-                        ),
-                    )
-                return
-            slot = pending.slot
-            assert pending.intent is not None  # built when the command's own exchange went
-            pending.part += 1
-            total = len(self.codec.control(0 if slot is None else slot.address, pending.intent))
-            if pending.part < total:
-                pending.attempts = 0
-                return
-            for target in self._targets(slot):
-                target.intent = without_reset(pending.intent)
-                self._confirming.replace(target, command, report)
-            confirm = needs_confirmation(pending)
-            if reply is not None and reply.status and not reply.status.accepts_bus_control:
-                outcome = Outcome.UNCONFIRMED if confirm else Outcome.REFUSED
-                self._finish(pending, report, result_of(outcome, LOCAL))
-                return
-            if not confirm or slot is None:
-                self._finish(pending, report, result_of(Outcome.DONE, ""))
-                return
-            self._queue.remove(pending)
-            self._confirming.start(pending, slot, now, report)
-            return
-        pending.part += 1
-        if pending.part < len(pending.access):
-            # attempts are not reset: a failure starts the access over from its first
-            # exchange, so the command's retries must bound the whole sequence
-            return
-        value = None if reply is None else reply.value
-        self._finish(pending, report, CommandResult(outcome=Outcome.DONE, value=value))
-
-    def _finish(self, pending: Pending, report: Report, result: CommandResult) -> None:
-        # Usually the head of its queue; a command behind one for a restarting drive may
-        # have been served first.
-        self._queue.remove(pending)
-        report.completions.append(completion_of(pending, result))
 
 
 def _same_drive(old: DrivePlan, new: DrivePlan) -> bool:

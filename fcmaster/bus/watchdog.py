@@ -8,21 +8,9 @@ when the gateway dies. Each time such a drive comes online (first adoption, afte
 demotion, after the line was down: it may have been replaced meanwhile),
 :class:`WatchdogAudit` reads those parameters through the line's ordinary command queue —
 reads like any other, served between polls, so polling keeps its pace — and judges the
-setting against the line's worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`):
-
-* ``ok`` — the drive stops (ramp or trip) once it hears nothing for longer than a round,
-  and a gateway restart does not trip it: its timeout covers the restart gap
-  (``restart_gap_s``: from the daemon's start until its first telegram to the drive, which
-  the drive answered then or, powered off meanwhile, later) and a round after it (the first
-  telegram of an adopted drive marks its control word not valid; the valid one follows
-  within a round);
-* ``off`` — it keeps running if the gateway dies (watchdog off, or an action such as
-  FC's freeze output that leaves the motor turning);
-* ``too_short`` — the timeout is shorter than a round, so normal polling trips it
-  (Mitsubishi Pr.122 = 0 counts so: it trips as soon as the link commands), or shorter than
-  the restart gap and a round, so a gateway restart trips it;
-* ``unknown`` — the reads failed, or the setting's effect cannot be told (FC's set-up
-  switch).
+setting against the line's worst-case poll round (:func:`~fcmaster.bus.poll_round.poll_round_s`)
+and what the daemon's restart cost the drive: ``ok``, ``off``, ``too_short`` or ``unknown``
+(:mod:`~fcmaster.bus.watchdog_verdict`).
 
 The audit's exchanges go through the queue one at a time for the whole line, and each is
 followed by a rest nine times as long as it took (``AUDIT_SHARE``), so the audit takes at
@@ -51,20 +39,24 @@ the port the drives are wired to).
 from __future__ import annotations
 
 import asyncio
-import enum
-import math
-from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable
 from functools import partial
-from typing import Any, Final
 
 import structlog
 
-from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.commands import Outcome
 from fcmaster.bus.master import BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, WatchdogPlan
 from fcmaster.bus.poll_round import poll_round_s
 from fcmaster.bus.stats import LineStats
+from fcmaster.bus.watchdog_access import AuditAccess, Execute, matches
+from fcmaster.bus.watchdog_verdict import (
+    Verdict,
+    WatchdogReport,
+    judge,
+    say,
+    suggested_timeout_s,
+)
 from fcmaster.clock import Clock
 from fcmaster.protocol.codec import Reply
 from fcmaster.protocol.drive import ControlIntent
@@ -80,72 +72,6 @@ __all__ = [
 ]
 
 log = structlog.get_logger("fcmaster.bus")
-
-ACTOR: Final = "watchdog-audit"  # the audit line's actor for the reads and writes
-# A timeout worth suggesting leaves room for retries, commands and probes between two
-# polls of a drive: this many worst-case rounds, and never under a second.
-SUGGESTED_ROUNDS: Final = 4
-SUGGESTED_MIN_S: Final = 1.0
-AUDIT_SHARE: Final = 0.1  # the most of the line's time the audit's exchanges take
-AUDIT_REST_MAX_S: Final = 10.0  # the longest rest after one exchange (one that timed out)
-
-Execute = Callable[[str, Command], Awaitable[CommandResult]]
-
-
-class Verdict(enum.StrEnum):
-    """What a drive's watchdog does for a dead gateway (DESIGN.md "Drive state")."""
-
-    OK = "ok"
-    OFF = "off"
-    TOO_SHORT = "too_short"
-    UNKNOWN = "unknown"
-
-
-@dataclass(slots=True, frozen=True)
-class WatchdogReport:
-    """A drive's watchdog as last read, and the verdict on it.
-
-    ``restart_gap_s`` is what the daemon's start cost the drive (None: not measured); it is
-    context for the verdict, not part of what the drive reported, so it does not take part
-    in comparisons.
-    """
-
-    timeout_s: float | None
-    action: str
-    verdict: Verdict
-    restart_gap_s: float | None = field(default=None, compare=False)
-
-    def to_json(self) -> dict[str, Any]:
-        """``{"timeout_s", "action", "verdict"}``, and ``restart_gap_s`` once measured."""
-        out: dict[str, Any] = {
-            "timeout_s": self.timeout_s,
-            "action": self.action,
-            "verdict": self.verdict.value,
-        }
-        if self.restart_gap_s is not None:
-            out["restart_gap_s"] = self.restart_gap_s
-        return out
-
-
-def judge(setting: WatchdogSetting, round_s: float, restart_gap_s: float = 0.0) -> Verdict:
-    """The verdict on ``setting`` for a line whose worst-case poll round is ``round_s``.
-
-    ``restart_gap_s``: how long the daemon's start took to reach the drive; a timeout that
-    does not cover it and a round after it (the first valid control word) trips the drive at
-    every gateway restart.
-    """
-    if setting.stops is False or setting.timeout_s is None:
-        return Verdict.OFF
-    if setting.stops is None:
-        return Verdict.UNKNOWN
-    if setting.timeout_s < restart_gap_s + round_s:
-        return Verdict.TOO_SHORT
-    return Verdict.OK
-
-
-def suggested_timeout_s(round_s: float) -> float:
-    """A timeout to advise for a line whose worst-case poll round is ``round_s`` (0.1 s steps)."""
-    return max(SUGGESTED_MIN_S, math.ceil(round_s * SUGGESTED_ROUNDS * 10 - 1e-9) / 10)
 
 
 class WatchdogAudit:
@@ -172,7 +98,6 @@ class WatchdogAudit:
         # drives a reload added: the gap runs from then, not from the daemon's start
         self._taken_at: dict[str, float] = {}
         self._stats: LineStats | None = None
-        self._turn = asyncio.Lock()  # one audit exchange at a time on the line
         self.facts = spec_for(plan.protocol).watchdog_of(plan)  # Mitsubishi: by drive_port
         self.round_s = poll_round_s(plan)[0] if plan.drives else 0.0
         self._report = report
@@ -183,6 +108,7 @@ class WatchdogAudit:
         self._observer: _AuditingObserver | None = None
         self._warned: dict[str, WatchdogReport] = {}  # the warning each drive last had
         self._offline: set[str] = set()  # drives that went offline since they last answered
+        self._access = AuditAccess(clock, self._log, self._offline)
         # drives whose refused write waits for a stop: name → (the stop seen, wait for a run
         # first); while any waits, the observer shows the audit the replies
         self._stop_waits: dict[str, tuple[asyncio.Future[None], bool]] = {}
@@ -207,7 +133,7 @@ class WatchdogAudit:
 
         ``stats``: the line's, where the master notes its first telegram to each drive.
         """
-        self._execute = execute
+        self._execute = self._access.execute = execute
         self._stats = stats
 
     def observing(self, inner: BusObserver) -> BusObserver:
@@ -277,17 +203,17 @@ class WatchdogAudit:
         if facts is None:  # pragma: no cover - every protocol has its facts
             self._finish(drive, None, f"no watchdog facts for {self.plan.protocol}")
             return
-        values, problem = await self._read(drive, facts)
+        values, problem = await self._access.read(drive, facts)
         if values is None and problem is None:
             return  # the line went down or shut: the next time online audits again
         wanted = drive.watchdog
         if wanted is not None:
             writes = facts.encode(wanted.timeout_s, wanted.action)
-            if values is None or not _matches(facts, values, writes):
-                written = await self._write(drive, wanted, writes)
+            if values is None or not matches(facts, values, writes):
+                written = await self._access.write(drive, wanted, writes)
                 if written is None:
                     return
-                values, problem = await self._read(drive, facts)
+                values, problem = await self._access.read(drive, facts)
                 if values is None and problem is None:
                     return
                 if written is Outcome.REFUSED:
@@ -324,13 +250,13 @@ class WatchdogAudit:
                 wanted_timeout_s=wanted.timeout_s,
                 wanted_action=wanted.action,
             )
-            written = await self._write(drive, wanted, writes)
+            written = await self._access.write(drive, wanted, writes)
             if written is None:
                 return
             if written is Outcome.REFUSED:  # its setting is as last reported: no new verdict
                 run_first = True  # at most once per stop: next after a run and a stop
                 continue
-            values, problem = await self._read(drive, facts)
+            values, problem = await self._access.read(drive, facts)
             if values is not None or problem is not None:
                 self._verdict(drive, facts, values, problem)
             return
@@ -365,75 +291,6 @@ class WatchdogAudit:
         elif not run_first and not seen.done():
             seen.set_result(None)
 
-    async def _exchange(self, name: str, command: Command) -> CommandResult:
-        """Carry out ``command``, then rest, keeping the audit to its share of the line."""
-        assert self._execute is not None
-        async with self._turn:
-            started = self._clock.now()
-            result = await self._execute(name, command)
-            spent = self._clock.now() - started
-            rest = spent * (1.0 - AUDIT_SHARE) / AUDIT_SHARE
-            await self._clock.sleep(min(rest, AUDIT_REST_MAX_S))
-        return result
-
-    async def _read(
-        self, drive: DrivePlan, facts: WatchdogFacts
-    ) -> tuple[list[float] | None, str | None]:
-        """The watchdog parameters' values; else None and why (None too: line gone)."""
-        values: list[float] = []
-        for parameter in facts.parameters:
-            command = Command(action=Action.READ, parameter=parameter, actor=ACTOR, internal=True)
-            result = await self._exchange(drive.name, command)
-            if result.outcome is Outcome.CANCELLED or (
-                not result.ok and drive.name in self._offline
-            ):
-                return None, None  # the line or the drive is gone: its return audits again
-            value = result.value
-            if result.outcome is not Outcome.DONE or value is None:
-                return None, f"{parameter} could not be read ({result.outcome.value}: " + (
-                    f"{result.reason})" if result.reason else "no value)"
-                )
-            if isinstance(value.value, str):
-                return None, f"{parameter} read as text {value.value!r}, not a number"
-            values.append(float(value.value))
-        return values, None
-
-    async def _write(
-        self, drive: DrivePlan, wanted: WatchdogPlan, writes: tuple[tuple[str, float], ...]
-    ) -> Outcome | None:
-        """Write the configured setting: DONE, or the first write's failure (None: line gone)."""
-        for parameter, value in writes:
-            command = Command(
-                action=Action.WRITE, parameter=parameter, value=value, persist=True, actor=ACTOR
-            )
-            result = await self._exchange(drive.name, command)
-            if result.outcome is Outcome.CANCELLED or (
-                not result.ok and drive.name in self._offline
-            ):
-                return None
-            if result.outcome is not Outcome.DONE:
-                self._log.warning(
-                    "drive.watchdog_write_failed",
-                    drive=drive.name,
-                    param=parameter,
-                    value=value,
-                    outcome=result.outcome.value,
-                    reason=result.reason or None,
-                    wanted_timeout_s=wanted.timeout_s,
-                    wanted_action=wanted.action,
-                    retry="once the drive is seen stopped"
-                    if result.outcome is Outcome.REFUSED
-                    else None,
-                )
-                return result.outcome
-        self._log.info(
-            "drive.watchdog_written",
-            drive=drive.name,
-            timeout_s=wanted.timeout_s,
-            action=wanted.action,
-        )
-        return Outcome.DONE
-
     def _finish(
         self, drive: DrivePlan, setting: WatchdogSetting | None, problem: str | None
     ) -> None:
@@ -442,57 +299,13 @@ class WatchdogAudit:
         if setting is None:
             report = WatchdogReport(None, "unknown", Verdict.UNKNOWN, gap)
             self._log.info("drive.watchdog_unknown", drive=drive.name, reason=problem)
-            self._warned.pop(drive.name, None)
-            self._report(self.plan.name, drive.name, report)
-            return
-        verdict = judge(setting, self.round_s, gap or 0.0)
-        report = WatchdogReport(setting.timeout_s, setting.action, verdict, gap)
-        facts = self._facts(drive)
-        round_s = round(self.round_s, 4)
-        # with room for a restart like this one: twice its gap
-        suggested = max(suggested_timeout_s(self.round_s), math.ceil((gap or 0.0) * 20) / 10)
-        fix = facts.advice(suggested)
-        if drive.watchdog is None:
-            fix += f", or configure the drive with watchdog: {{timeout_s: {suggested:g}}}"
-        fields: dict[str, Any] = {
-            "drive": drive.name,
-            "address": drive.address,
-            "timeout_s": setting.timeout_s,
-            "action": setting.action,
-            "poll_round_s": round_s,
-            "restart_gap_s": None if gap is None else round(gap, 3),
-        }
-        if self._warned.get(drive.name) == report:
-            # The same again (a drive that comes and goes): said once, not at every return.
-            self._log.info("drive.watchdog_unchanged", **fields, verdict=verdict.value)
-        elif verdict is Verdict.OFF:
-            self._log.warning(
-                "drive.watchdog_off",
-                **fields,
-                consequence="the motor keeps running if the gateway dies",
-                fix=fix,
-            )
-        elif verdict is Verdict.TOO_SHORT:
-            restart = setting.timeout_s is not None and setting.timeout_s >= self.round_s
-            self._log.warning(
-                "drive.watchdog_too_short",
-                **fields,
-                consequence=(
-                    "a gateway restart trips the drive"
-                    if restart
-                    else "normal polling can trip the drive"
-                ),
-                fix=fix,
-            )
-        elif verdict is Verdict.UNKNOWN:
-            self._log.info(
-                "drive.watchdog_unknown",
-                **fields,
-                reason=f"what {setting.action!r} does cannot be told from the parameters",
-            )
         else:
-            self._log.info("drive.watchdog_checked", **fields, verdict=verdict.value)
-        if verdict in (Verdict.OFF, Verdict.TOO_SHORT):
+            report = WatchdogReport(
+                setting.timeout_s, setting.action, judge(setting, self.round_s, gap or 0.0), gap
+            )
+            said_before = self._warned.get(drive.name) == report
+            say(self._log, drive, self._facts(drive), report, self.round_s, again=said_before)
+        if report.verdict in (Verdict.OFF, Verdict.TOO_SHORT):
             self._warned[drive.name] = report
         else:
             self._warned.pop(drive.name, None)
@@ -531,14 +344,3 @@ class _AuditingObserver:
             self._audit.drive_online(drive, at)
         else:
             self._audit.drive_offline(drive)
-
-
-def _matches(
-    facts: WatchdogFacts, values: list[float], writes: tuple[tuple[str, float], ...]
-) -> bool:
-    """Whether the values read already hold what ``writes`` would write."""
-    read = dict(zip(facts.parameters, values, strict=True))
-    return all(
-        parameter in read and math.isclose(read[parameter], value, abs_tol=1e-6)
-        for parameter, value in writes
-    )

@@ -9,9 +9,9 @@ What a transport can do beyond moving bytes is part of its type, never guessed a
 feed a framer in its reader callback, calling back once a piece is whole), the USB
 :attr:`Transport.adapter` behind it, and :meth:`Transport.appeared` for a device node that
 comes back. With framing, the :class:`~fcmaster.bus.link.Link` reads replies without a task
-waking per chunk, and the BusMaster carries its polls in callbacks
-(:mod:`fcmaster.bus.steady`) — on a real port and on the virtual-time tests' scripted line
-alike. Without it the same rules run in the master's task.
+waking per chunk, and the BusMaster carries every step in callbacks
+(:mod:`fcmaster.bus.runner`) — on a real port and on the virtual-time tests' scripted line
+alike. A line's transport must have it.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ framer (:meth:`Receiver.watch`) is not woken per chunk: the chunks are fed to th
 right here, and its handler is called once, when the framer holds a whole piece (a frame,
 or bytes it skipped), when an inter-character gap has passed after an unfinished frame, or
 at the deadline. A reply then costs one call however the adapter split it, and the handler
-may be a plain function: the bus master's steady polling decodes the reply and schedules
+may be a plain function: a line's runner decodes the reply and schedules
 the next request from it without a task ever waking.
 
 Times are the transport's :class:`~fcmaster.clock.Clock`'s, and so are the timers (its

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import pytest
 
+from fcmaster.bus.answer_times import ANSWER_SAMPLES
 from fcmaster.bus.commands import Outcome
-from fcmaster.bus.link import ANSWER_SAMPLES
 from fcmaster.bus.plan import DrivePlan
 from tests.fakes import Sent, Timed
 from tests.orders import orders

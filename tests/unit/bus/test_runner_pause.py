@@ -1,7 +1,7 @@
 """The steady path in virtual time: polls carried in callbacks, interrupted in their pause.
 
 The scripted line has a serial port's callback powers, so the master carries its polls as
-it does on a real port (:mod:`fcmaster.bus.steady`): the reply is taken in the reader
+it does on a real port (:mod:`fcmaster.bus.runner`): the reply is taken in the reader
 callback, the next poll is chosen there and written by a timer when the pause ends. What
 happens inside that pause — a shutdown cancelling the queue and its stops coming in — must
 be seen when it ends: the stops go first and the poll chosen before them waits.
@@ -17,9 +17,9 @@ from collections.abc import Callable
 
 import pytest
 
-from fcmaster.bus import steady
+from fcmaster.bus import runner
 from fcmaster.bus.commands import Outcome
-from fcmaster.bus.planner import Planner, Step
+from fcmaster.bus.planner import Planner, Step, StepKind
 from tests.orders import orders
 from tests.unit.bus.bench import PAUSE_S, STOP_WORD, T0, Bench, bench
 from tests.unit.bus.test_master import A, B
@@ -53,28 +53,33 @@ async def stops_in_a_polls_pause() -> list[str]:
     return problems
 
 
-async def test_the_master_carries_polls_in_callbacks_on_the_scripted_line(
+async def test_the_master_carries_every_step_in_callbacks_on_the_scripted_line(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    # The virtual-time line runs the path a real serial port runs: polls are written by
-    # the steady polling's timer, not by the master's task.
-    written_by_steady: list[Step] = []
-    go = steady.SteadyPolling._go
+    # The virtual-time line runs the path a real serial port runs: every request — polls,
+    # probes and commands alike — is written by the runner's callbacks, not by a task.
+    # (A step's _go may choose again and send another: each request is counted once.)
+    written_by_runner: dict[int, Step] = {}
+    go = runner.LineRunner._go
 
-    def counting_go(self: steady.SteadyPolling) -> None:
+    def counting_go(self: runner.LineRunner) -> None:
         step = self._step
         sent_before = len(b.transport.sent)
         go(self)
         if step is not None and len(b.transport.sent) > sent_before:
-            written_by_steady.append(step)
+            written_by_runner.setdefault(sent_before, step)  # the innermost sent it
 
-    monkeypatch.setattr(steady.SteadyPolling, "_go", counting_go)
+    monkeypatch.setattr(runner.LineRunner, "_go", counting_go)
     b = bench(A, B)
     async with b.master:
+        await b.clock.run_until(T0 + 0.5)
+        result = await b.complete(b.submit(orders(b.master, "a").stop()))
         await b.clock.run_until(T0 + 1.0)
-    polls = len(b.transport.sent)
-    assert polls > 20  # about 30 ms a poll at 19200
-    assert len(written_by_steady) >= polls - 5  # all but the first of each run of polls
+    assert result.outcome is Outcome.DONE
+    requests = len(b.transport.sent)
+    assert requests > 20  # about 30 ms a poll at 19200
+    assert len(written_by_runner) == requests
+    assert any(step.kind is StepKind.COMMAND for step in written_by_runner.values())
 
 
 async def test_stops_in_a_polls_pause_go_first_on_the_steady_path() -> None:
