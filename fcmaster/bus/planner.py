@@ -46,11 +46,9 @@ other; a refusal of any of them ends the command with that refusal, and otherwis
 one's reply is the command's result. A parameter access that fails part-way is retried from
 its first exchange, since what the earlier ones selected in the drive may be gone.
 
-A drive that restarts on a request (an exchange with ``deaf_s``: the Mitsubishi inverter
-reset) gets no reply to wait for and hears nothing for a while: the planner sends it
-nothing, polls included, until ``deaf_s`` has passed, while the other drives go on being
-served. Its output went off with the restart, so its commanded intent becomes a stop: a
-reset never restarts a motor.
+A drive that restarts on a request (``deaf_s``: the Mitsubishi inverter reset; its intent
+becomes a stop) or needs time after one (``settle_s``: a profile's pacing) is sent nothing,
+polls included, until then, while the other drives are served (:mod:`~fcmaster.bus.pacing`).
 
 Every command ends exactly once, reported as a :class:`Completion`: the master resolves
 the caller's future from it. A stop supersedes motion commands of the same drive that are
@@ -72,7 +70,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from fcmaster.bus import admission
+from fcmaster.bus import admission, pacing
 from fcmaster.bus.adoption import Adoption, not_adopted
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
 from fcmaster.bus.confirm import LOCAL, needs_confirmation, note_ramp, ramp_keys
@@ -83,7 +81,6 @@ from fcmaster.bus.intents import (
     learn,
     learning_read,
     needs_learning,
-    restarted,
     stopping_only,
     unknown,
     without_reset,
@@ -380,15 +377,13 @@ class Planner:
             self._advance(step.pending, report, None, now)
         if self._confirming:
             self._confirming.expire(now, report)
-        deaf_s = step.exchange.deaf_s
-        if deaf_s > 0:
-            for target in self._targets(step.slot):
-                restarted(target, now + deaf_s)
+        pacing.leave_alone(step, self._targets(step.slot), now)
         return report
 
     def on_reply(self, step: Step, reply: Reply, now: float) -> Report:
         """A valid reply to ``step`` arrived."""
         report = Report()
+        pacing.leave_alone(step, self._targets(step.slot), now)
         self._in_flight = None
         slot = step.slot
         tripped = slot is not None and self._heard(slot, step, reply, now, report)
@@ -404,6 +399,7 @@ class Planner:
     def on_failure(self, step: Step, now: float, reason: str) -> Report:
         """No valid reply to ``step`` before its deadline."""
         report = Report()
+        pacing.leave_alone(step, self._targets(step.slot), now)
         self._in_flight = None
         slot = step.slot
         if step.kind is StepKind.COMMAND and step.pending is not None:

@@ -139,8 +139,8 @@ class WatchdogProfile:
 class Pacing:
     """Waits a family asks for beyond the 3.5-character silence.
 
-    Recorded from the manuals; the bus does not apply them yet (a line's ``pause_s`` can
-    stand in for ``between_steps_s`` meanwhile).
+    The codec puts them on the exchanges they follow (``Exchange.settle_s``) and the bus
+    keeps them for that drive alone: the line's other drives are served meanwhile.
     """
 
     after_write_s: float = 0.0  # after a parameter write, before the next request
