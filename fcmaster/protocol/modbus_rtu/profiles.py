@@ -97,6 +97,10 @@ ABB_DRIVES: Final = DriveProfile(
         ),
         Value(name="DC voltage", register=Register(address=110, scale=0.01, unit="V")),
     ),
+    parameters=(
+        Value(name="Acceleration time 1", register=Register(address=2311, scale=0.1, unit="s")),
+        Value(name="Deceleration time 1", register=Register(address=2312, scale=0.1, unit="s")),
+    ),
     sources=_ABB_MANUALS,
     unverified=(
         "The classic register map is the ACS850's; ACS580 with 58.33 = mode 0 is assumed the same",
@@ -105,6 +109,7 @@ ABB_DRIVES: Final = DriveProfile(
         "04.01 Tripping fault at register 400401; fault code texts other than 6681",
         "58.14 value 0 = no action, 1 = fault, 2 = last speed; 58.16 in 0.1 s units",
         "01.07, 01.10, 01.11 register scaling (FbEq16)",
+        "23.12/23.13 at 402312/402313 (the xx.yy → 4xxyy rule of 58.14) and their 0.1 s scaling",
     ),
 )
 
@@ -249,6 +254,10 @@ ALTIVAR_CIA402: Final = DriveProfile(
         Value(name="DC bus voltage", register=Register(address=3207, scale=0.1, unit="V")),
         Value(name="Motor thermal state", register=Register(address=3209, unit="%")),
     ),
+    parameters=(
+        Value(name="ACC Acceleration", register=Register(address=9001, scale=0.1, unit="s")),
+        Value(name="DEC Deceleration", register=Register(address=9002, scale=0.1, unit="s")),
+    ),
     sources=(
         "ATV600 Communication Parameters EAV64332 V1.5 (spreadsheet): two logic addresses "
         "for CMD and ETA; 'speed' addresses in rpm, 'frequency' addresses in Hz",
@@ -262,6 +271,7 @@ ALTIVAR_CIA402: Final = DriveProfile(
         "CMD bit 11 as reverse, ETA bit 15 as reverse rotation",
         "LFT fault numbers and their texts",
         "SLL option values",
+        "ACC 9001 and DEC 9002 in 0.1 s (INR = 0.1)",
     ),
 )
 
@@ -315,6 +325,14 @@ YASKAWA_MEMOBUS: Final = DriveProfile(
         Value(name="Output current", register=Register(address=0x0026, scale=0.1, unit="A")),
         Value(name="DC bus voltage", register=Register(address=0x0031, unit="V")),
     ),
+    parameters=(
+        Value(
+            name="C1-01 Acceleration Time 1", register=Register(address=0x0200, scale=0.1, unit="s")
+        ),
+        Value(
+            name="C1-02 Deceleration Time 1", register=Register(address=0x0201, scale=0.1, unit="s")
+        ),
+    ),
     # A parameter written by MEMOBUS takes effect after an Enter command; the drive needs
     # time before it answers again.
     pacing=Pacing(after_write_s=0.01),
@@ -332,6 +350,7 @@ YASKAWA_MEMOBUS: Final = DriveProfile(
         "Fault code numbers of U2-01 and their texts",
         "H5-04/H5-05/H5-09 register addresses 0428H/0429H/0435H",
         "The 10 ms wait after a parameter write",
+        "C1-01/C1-02 at 0200H/0201H in 0.1 s (C1-10 = 1)",
     ),
 )
 
@@ -378,6 +397,16 @@ DANFOSS_FC_MODBUS: Final = DriveProfile(
         ),
         Value(name="DC link voltage", register=Register(address=16299, words=2, unit="V")),
         Value(name="Power", register=Register(address=16099, words=2, scale=0.01, unit="kW")),
+    ),
+    parameters=(
+        Value(
+            name="3-41 Ramp 1 Ramp Up Time",
+            register=Register(address=3409, words=2, scale=0.01, unit="s"),
+        ),
+        Value(
+            name="3-42 Ramp 1 Ramp Down Time",
+            register=Register(address=3419, words=2, scale=0.01, unit="s"),
+        ),
     ),
     sources=(
         f"{_FC202} p. 175, table 7.15: holding registers 50000 CTW, 50010 REF, 50200 STW, "

@@ -10,6 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from fcmaster.errors import ConfigError, UsageError
+from fcmaster.protocol.modbus_rtu.keys import parse_register
+from fcmaster.protocol.modbus_rtu.parameter_tables import members, tables_of
 from fcmaster.protocol.modbus_rtu.profile import (
     Register,
     StateMachine,
@@ -245,3 +247,27 @@ def test_a_watchdog_action_register_without_its_meanings_reads_as_unknown() -> N
     )
     setting = parse_profile_text(text).watchdog.setting([2.0, 1])
     assert (setting.timeout_s, setting.action, setting.stops) == (2.0, "option 1", None)
+
+
+def test_a_profiles_settings_make_up_its_parameter_set_then_its_watchdog() -> None:
+    text = USER_PROFILE + (
+        'parameters: [{name: "Acceleration", address: 600, scale: 0.1, unit: s},\n'
+        '             {name: "Deceleration", address: 602, scale: 0.1, unit: s}]\n'
+    )
+    profile = parse_profile_text(text)
+    assert [v.name for v in profile.parameters] == ["Acceleration", "Deceleration"]
+    # 600 is the watchdog's timeout too: one member, under the setting's name
+    assert members(profile) == (
+        ("hr600", "Acceleration"),
+        ("hr602", "Deceleration"),
+        ("hr601", "Communication watchdog action"),
+    )
+    tables = tables_of(profile)
+    assert tables.unit_of(parse_register("hr602")) == "s"
+    assert tables.unit_of(parse_register("hr515")) == "A"  # a monitored value's unit too
+    assert tables_of(None).set_members == ()
+    found = problems_of(
+        USER_PROFILE + "parameters: [{name: x, address: 3, input: true}, {address: 4}]\n"
+    )
+    assert found["my.yaml: parameters[0].input"] == "a setting is a holding register"
+    assert "not None" in found["my.yaml: parameters[1].name"]
