@@ -199,7 +199,8 @@ class ProtocolSpec(Generic[OptionsT]):
     executed_control: ExecutedControl | None = None
     diagnosis: DiagnosisParameters
     simulator: str  # "module:attribute" of its SimProtocol in the sim layer (see above)
-    link_type: int  # its pcapng link type in captures (a private USER type, 147-162)
+    link_type: int  # its pcapng link type in captures (a private USER type, 147-162, or one
+    # a dissector knows: see fcmaster.protocol.pcapng)
     # The drive's communication watchdog: its parameters, their values, what counts as off
     watchdog: WatchdogFacts
     # Option sets the doctor tries, in order, at a character format where the options'

@@ -106,7 +106,7 @@ SPEC: Final[ProtocolSpec[ModbusOptions]] = ProtocolSpec(
         delay="its response delay parameter",
         factory_delay_s=0.0,
     ),
-    link_type=150,  # pcapng USER3
+    link_type=250,  # pcapng RTAC_SERIAL: Wireshark decodes its payload as Modbus RTU
     simulator="fcmaster.sim.modbus_rtu.simulator:SIMULATOR",
     watchdog=WATCHDOG,
     watchdog_of_profile=profile_facts,
