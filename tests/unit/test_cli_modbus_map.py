@@ -94,7 +94,7 @@ def test_a_modbus_rtu_drives_values_carry_its_profiles_names_units_and_registers
         ("hr49", "f32", "V"), ("hr49.raw", "i32", ""),
     ]  # fmt: skip
     # a monitor list names registers; one the profile lists is in its unit (hr3207 is the
-    # profile's DC bus voltage; ir3204 is not listed as an input register: no unit)
+    # profile's mains voltage; ir3204 is not listed as an input register: no unit)
     assert values(3) == [
         ("ir3204", "f32", ""), ("ir3204.raw", "i32", ""),
         ("hr3207", "f32", "V"), ("hr3207.raw", "i32", ""),

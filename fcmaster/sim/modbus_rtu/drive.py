@@ -383,6 +383,8 @@ def _reading(name: str, register: Register, motor: Motor) -> Callable[[], float]
     words = name.lower()
     if "current" in words:
         return lambda: motor.current_a
+    if "mains" in words:  # a six-pulse bridge's DC link is about 1.35 times the mains
+        return lambda: motor.dc_link_v / 1.35
     if "voltage" in words:
         return lambda: motor.dc_link_v
     if "power" in words:

@@ -112,6 +112,17 @@ def test_abb_watchdog_settings() -> None:
     assert watchdog.setting([3.0, 2]).action == "last speed"
 
 
+def test_altivar_sll_options_the_readings_disagree_on_are_not_taken_as_a_stop() -> None:
+    watchdog = BUILT_IN["altivar-cia402"].watchdog
+    assert watchdog.setting([2.0, 1]).stops is True  # freewheel
+    assert watchdog.setting([2.0, 2]).stops is True  # ramp stop, or Stt (a ramp by default)
+    assert watchdog.setting([2.0, 0]).stops is False  # ignore
+    # fast stop or fallback speed; speed maintained or ramp stop: the verdict stays unknown
+    assert watchdog.setting([2.0, 3]).stops is None
+    assert watchdog.setting([2.0, 5]).stops is None
+    assert watchdog.setting([2.0, 7]).stops is None  # no reading for it at all
+
+
 def test_v20_watchdog_is_off_at_zero() -> None:
     watchdog = BUILT_IN["sinamics-v20"].watchdog
     assert watchdog.setting([0.0]).timeout_s is None
