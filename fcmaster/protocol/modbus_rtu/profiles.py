@@ -271,6 +271,8 @@ ALTIVAR_CIA402: Final = DriveProfile(
         "7121 (LFT), communication settings 6001-6005; HSP/LSP at 3104/3105 in 0.1 Hz",
         "Altivar Machine ATV320 communication parameters (NVE41316): TTO at 6005 in 0.1 s, "
         "ACC 9001 and DEC 9002 in 0.1 s",
+        "The last three as transcribed from those documents into public register maps; "
+        "their pages themselves were not seen",
     ),
     unverified=(
         "The addresses above are checked on ATV12/ATV312/ATV320 lists, not on ATV340, ATV600 "
