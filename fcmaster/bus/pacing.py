@@ -17,19 +17,25 @@ waits too).
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 from fcmaster.bus.intents import restarted
 from fcmaster.bus.steps import DriveSlot, Step
 
 
-def leave_alone(step: Step, targets: Iterable[DriveSlot], now: float) -> None:
-    """``step``'s exchange ended at ``now``: keep its ``targets`` unaddressed as it asks."""
+def leave_alone(
+    step: Step, targets: Callable[[DriveSlot | None], Iterable[DriveSlot]], now: float
+) -> None:
+    """``step``'s exchange ended at ``now``: keep the drives it went to unaddressed as it asks.
+
+    ``targets`` gives those drives from the step's slot (all of them for a broadcast); it is
+    asked only when the exchange wants a wait, so a reply that does not costs nothing.
+    """
     exchange = step.exchange
     if exchange.deaf_s > 0:
-        for target in targets:
+        for target in targets(step.slot):
             restarted(target, now + exchange.deaf_s)
     elif exchange.settle_s > 0:
         until = now + exchange.settle_s
-        for target in targets:
+        for target in targets(step.slot):
             target.deaf_until = max(target.deaf_until, until)

@@ -377,13 +377,13 @@ class Planner:
             self._advance(step.pending, report, None, now)
         if self._confirming:
             self._confirming.expire(now, report)
-        pacing.leave_alone(step, self._targets(step.slot), now)
+        pacing.leave_alone(step, self._targets, now)
         return report
 
     def on_reply(self, step: Step, reply: Reply, now: float) -> Report:
         """A valid reply to ``step`` arrived."""
         report = Report()
-        pacing.leave_alone(step, self._targets(step.slot), now)
+        pacing.leave_alone(step, self._targets, now)
         self._in_flight = None
         slot = step.slot
         tripped = slot is not None and self._heard(slot, step, reply, now, report)
@@ -399,7 +399,7 @@ class Planner:
     def on_failure(self, step: Step, now: float, reason: str) -> Report:
         """No valid reply to ``step`` before its deadline."""
         report = Report()
-        pacing.leave_alone(step, self._targets(step.slot), now)
+        pacing.leave_alone(step, self._targets, now)
         self._in_flight = None
         slot = step.slot
         if step.kind is StepKind.COMMAND and step.pending is not None:
