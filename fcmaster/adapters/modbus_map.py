@@ -236,6 +236,8 @@ def _value_registers(line: LinePlan, drive: DrivePlan) -> list[Register]:
         if drive.monitor is None
         else tuple(codec.parameter(text) for text in drive.monitor)
     )
+    # a Modbus RTU drive's units are its profile's
+    unit_of = spec_for(line.protocol).parameters_of(line, drive.profile).unit_of
     registers = []
     for n, key in enumerate(dict.fromkeys(keys)):
         address = VALUES_START + 4 * n
@@ -252,9 +254,8 @@ def _value_registers(line: LinePlan, drive: DrivePlan) -> list[Register]:
             # bit 31 set) shows as its two's complement, so DWORD access sees every bit.
             return measured.raw - (1 << 32) if measured.raw >= 1 << 31 else measured.raw
 
-        unit = spec_for(line.protocol).parameters.unit_of(key)
         registers.append(
-            Register(table="input", address=address, name=key.name, type="f32", unit=unit,
+            Register(table="input", address=address, name=key.name, type="f32", unit=unit_of(key),
                      read=_fresh(value))
         )  # fmt: skip
         registers.append(

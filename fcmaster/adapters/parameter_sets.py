@@ -56,7 +56,7 @@ async def read_drive_set(
     plan, state = gateway.drive_plan(name), gateway.fleet.find(name)
     if plan is None or state is None:
         raise KeyError(name)
-    profile = profile_for(state.protocol)
+    profile = profile_for(state.protocol, profile=plan.profile)  # modbus-rtu: the drive's
     turn = pace or _unpaced
 
     async def read(parameter: str) -> ParameterValue | DriveError:

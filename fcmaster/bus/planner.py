@@ -40,11 +40,9 @@ repeated: the drive is adopted again from its next good status. Reverting would 
 motor (a start applied, its replies lost, then a stop). A trip (status fault rising) turns
 the intent into a stop, so a later reset does not restart the motor; a new start is needed.
 
-A drive that restarts on a request (an exchange with ``deaf_s``: the Mitsubishi inverter
-reset) gets no reply to wait for and hears nothing for a while: the planner sends it
-nothing, polls included, until ``deaf_s`` has passed, while the other drives go on being
-served. Its output went off with the restart, so its commanded intent becomes a stop: a
-reset never restarts a motor.
+A drive that restarts on a request (``deaf_s``: the Mitsubishi inverter reset; its intent
+becomes a stop) or needs time after one (``settle_s``: a profile's pacing) is sent nothing,
+polls included, until then, while the other drives are served (:mod:`~fcmaster.bus.pacing`).
 
 Every command ends exactly once, reported as a :class:`Completion`: the master resolves
 the caller's future from it. A stop supersedes motion commands of the same drive that are
@@ -68,12 +66,11 @@ from __future__ import annotations
 
 import dataclasses
 
-from fcmaster.bus import admission
+from fcmaster.bus import admission, pacing
 from fcmaster.bus.commands import Action, Command
 from fcmaster.bus.hearing import Hearing
 from fcmaster.bus.intents import (
     forget,
-    restarted,
     stopping_only,
     without_reset,
 )
@@ -347,15 +344,13 @@ class Planner:
             self._progress.advance(step.pending, report, None, now)
         if self._confirming:
             self._confirming.expire(now, report)
-        deaf_s = step.exchange.deaf_s
-        if deaf_s > 0:
-            for target in self._targets(step.slot):
-                restarted(target, now + deaf_s)
+        pacing.leave_alone(step, self._targets, now)
         return report
 
     def on_reply(self, step: Step, reply: Reply, now: float) -> Report:
         """A valid reply to ``step`` arrived."""
         report = Report()
+        pacing.leave_alone(step, self._targets, now)
         self._in_flight = None
         slot = step.slot
         tripped = slot is not None and self._hearing.heard(slot, step, reply, now, report)
@@ -371,6 +366,7 @@ class Planner:
     def on_failure(self, step: Step, now: float, reason: str) -> Report:
         """No valid reply to ``step`` before its deadline."""
         report = Report()
+        pacing.leave_alone(step, self._targets, now)
         self._in_flight = None
         slot = step.slot
         pending = step.pending

@@ -54,7 +54,7 @@ class DriveSlot:
     running: bool | None = None  # as the last status said; None: not known yet
     reverse: bool = False
     output_hz: float | None = None  # the last output reported (a magnitude)
-    deaf_until: float = 0.0  # restarting (after an inverter reset): nothing goes to it before
+    deaf_until: float = 0.0  # restarting or settling (bus.pacing): nothing goes to it before
     local: bool = False  # the last status said local operation: bus commands are ignored
     status_word: int | None = None  # the last status word, raw
     alarms: dict[str, tuple[str, ...]] = field(default_factory=dict)  # source word → texts

@@ -48,6 +48,9 @@ class Exchange:
     # The drive restarts on this request (an inverter reset): its output goes off and it
     # hears nothing for this many seconds, so it must not be addressed again before then.
     deaf_s: float = 0.0
+    # The drive needs this long after the exchange before it is addressed again (a family's
+    # pacing: Yaskawa after a parameter write); the other drives are served meanwhile.
+    settle_s: float = 0.0
 
     @property
     def expects_reply(self) -> bool:

@@ -48,12 +48,16 @@ class SetProfile:
     ranges: tuple[tuple[str, float, float], ...] = ()  # (parameter, low, high) in its unit
 
 
-def profile_for(protocol: str) -> SetProfile:
-    """The set profile of ``protocol``; UsageError for one this project does not know."""
+def profile_for(protocol: str, source: object = None, profile: object = None) -> SetProfile:
+    """The set profile of ``protocol``; UsageError for one this project does not know.
+
+    Where a protocol's drives follow drive profiles (modbus-rtu), the set is the drive's
+    ``profile``'s, else that of the profile the line's options (``source``) name.
+    """
     spec = PROTOCOLS.get(protocol)
     if spec is None:
         raise UsageError(f"no parameter sets for protocol {protocol!r}")
-    tables = spec.parameters
+    tables = spec.parameters_of(source, profile)
     return SetProfile(
         protocol=protocol,
         members=tables.set_members,

@@ -6,9 +6,15 @@ little-endian with microsecond timestamps (the format's default resolution, so n
 ``if_tsresol``). The reader takes either byte order and any timestamp resolution, and
 skips blocks and options it does not know.
 
-There is no registered link-layer type for these drive protocols, so each gets one of the
-types reserved for private use (LINKTYPE_USER0-15, 147-162), always the same one (its
-spec's ``link_type``):
+Each protocol always has the same link-layer type (its spec's ``link_type``). No type is
+registered for the drive vendors' protocols, so they get types reserved for private use
+(LINKTYPE_USER0-15, 147-162). Modbus RTU goes under LINKTYPE_RTAC_SERIAL (250), a
+registered serial-line type whose payload Wireshark dissects as Modbus RTU once told to
+(*Decode As… → RTAC Serial → Modbus RTU*; ``tshark -d rtacser.data,mbrtu``). Its packets
+carry a 12-byte header before the frame: the time (seconds and microseconds since 1970,
+each a big-endian u32), the event (0x01 data sent, 0x02 data received), the control lines
+and a footer (both 0 here). The writer adds it and the reader takes it off, so a
+:class:`Packet`'s ``data`` is always the frame.
 
 =================  ===========  ===
 protocol           link type    DLT
@@ -16,6 +22,7 @@ protocol           link type    DLT
 danfoss-fc         USER0        147
 mitsubishi         USER1        148
 enc                USER2        149
+modbus-rtu         RTAC_SERIAL  250
 =================  ===========  ===
 
 A packet is one frame as the master's port saw it: outbound (``epb_flags`` direction 2)
@@ -53,6 +60,11 @@ EPB_FLAGS: Final = 2
 
 INBOUND: Final = 1  # epb_flags bits 0-1
 OUTBOUND: Final = 2
+
+RTAC_SERIAL: Final = 250  # LINKTYPE_RTAC_SERIAL: a 12-byte header before each frame
+_RTAC_HEADER: Final = struct.Struct(">IIBBH")  # seconds, microseconds, event, lines, footer
+_RTAC_SENT: Final = 0x01  # DATA_TX_START
+_RTAC_RECEIVED: Final = 0x02  # DATA_RX_START
 
 
 class PcapngError(ProtocolError, ValueError):
@@ -159,25 +171,35 @@ def interface_description(interface: Interface, snaplen: int = 0) -> bytes:
     return _block(IDB, body)
 
 
-def enhanced_packet(packet: Packet) -> bytes:
-    """An Enhanced Packet Block; the timestamp in the interface's units (microseconds)."""
+def enhanced_packet(packet: Packet, link_type: int = 0) -> bytes:
+    """An Enhanced Packet Block; the timestamp in the interface's units (microseconds).
+
+    ``link_type``: its interface's, which may put a header before the frame (RTAC serial).
+    """
     options: list[tuple[int, bytes]] = []
     if packet.comment:
         options.append((OPT_COMMENT, packet.comment.encode()))
-    if packet.direction:
+    if packet.direction or link_type == RTAC_SERIAL:  # its event says a direction: say ours
         options.append((EPB_FLAGS, struct.pack("<I", packet.direction)))
     ts = packet.timestamp_us
-    head = struct.pack(
-        "<IIIII", packet.interface, ts >> 32, ts & 0xFFFFFFFF, len(packet.data), len(packet.data)
-    )
-    return _block(EPB, head + _pad(packet.data) + _options(options))
+    data = packet.data
+    if link_type == RTAC_SERIAL:
+        event = _RTAC_RECEIVED if packet.direction == INBOUND else _RTAC_SENT
+        seconds, micros = divmod(ts, 1_000_000)
+        data = _RTAC_HEADER.pack(seconds & 0xFFFFFFFF, micros, event, 0, 0) + data
+    head = struct.pack("<IIIII", packet.interface, ts >> 32, ts & 0xFFFFFFFF, len(data), len(data))
+    return _block(EPB, head + _pad(data) + _options(options))
 
 
 def encode(capture: Capture) -> bytes:
     """A whole file: one section with the capture's interfaces and packets."""
     parts = [section_header(capture.application)]
     parts += [interface_description(i) for i in capture.interfaces]
-    parts += [enhanced_packet(p) for p in capture.packets]
+    links = [i.link_type for i in capture.interfaces]
+    parts += [
+        enhanced_packet(p, links[p.interface] if p.interface < len(links) else 0)
+        for p in capture.packets
+    ]
     return b"".join(parts)
 
 
@@ -270,12 +292,21 @@ def _packet(body: bytes, order: str, interfaces: list[Interface]) -> Packet:
         raise PcapngError("a packet's data runs past its block")
     options = _parse_options(body[20 + captured + (-captured % 4) :], order)
     flags = next(
-        (struct.unpack(order + "I", v)[0] for c, v in options if c == EPB_FLAGS and len(v) == 4), 0
+        (struct.unpack(order + "I", v)[0] for c, v in options if c == EPB_FLAGS and len(v) == 4),
+        None,
     )
+    data, direction = body[20 : 20 + captured], (flags or 0) & 3
+    if interfaces[interface].link_type == RTAC_SERIAL:
+        if len(data) < _RTAC_HEADER.size:
+            raise PcapngError("an RTAC serial packet shorter than its 12-byte header")
+        event = data[8]
+        if flags is None:  # written elsewhere, without flags: the event says which way
+            direction = {_RTAC_SENT: OUTBOUND, _RTAC_RECEIVED: INBOUND}.get(event, 0)
+        data = data[_RTAC_HEADER.size :]
     return Packet(
         interface=interface,
         timestamp_us=_microseconds(high << 32 | low, interfaces[interface].tsresol),
-        data=body[20 : 20 + captured],
-        direction=flags & 3,
+        data=data,
+        direction=direction,
         comment=_text(options, OPT_COMMENT),
     )

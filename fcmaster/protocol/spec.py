@@ -199,7 +199,8 @@ class ProtocolSpec(Generic[OptionsT]):
     executed_control: ExecutedControl | None = None
     diagnosis: DiagnosisParameters
     simulator: str  # "module:attribute" of its SimProtocol in the sim layer (see above)
-    link_type: int  # its pcapng link type in captures (a private USER type, 147-162)
+    link_type: int  # its pcapng link type in captures (a private USER type, 147-162, or one
+    # a dissector knows: see fcmaster.protocol.pcapng)
     # The drive's communication watchdog: its parameters, their values, what counts as off
     watchdog: WatchdogFacts
     # Option sets the doctor tries, in order, at a character format where the options'
@@ -213,6 +214,10 @@ class ProtocolSpec(Generic[OptionsT]):
     # The watchdog facts of a drive with this profile (a DrivePlan's ``profile``) where its
     # protocol's drives each follow one (modbus-rtu); None: the line's.
     watchdog_of_profile: Callable[[object], WatchdogFacts | None] | None = None
+    # The parameter tables of a drive on a line with these options and, where its protocol's
+    # drives follow profiles, this profile (a DrivePlan's, or None: the line's); None:
+    # ``parameters`` for every drive.
+    parameters_for: Callable[[OptionsT, object], ParameterTables] | None = None
 
     def options_of(self, source: object = None) -> OptionsT:
         """This protocol's options as ``source`` has them.
@@ -262,6 +267,12 @@ class ProtocolSpec(Generic[OptionsT]):
         reason = f"{address} is outside {addresses.start}-{addresses.stop - 1}"
         hint = self.address_hint(self.options_of(source), address)
         return f"{reason}: {hint}" if hint else reason
+
+    def parameters_of(self, source: object = None, profile: object = None) -> ParameterTables:
+        """The parameter tables of a drive with ``profile`` on a line with ``source``'s options."""
+        if self.parameters_for is None:
+            return self.parameters
+        return self.parameters_for(self.options_of(source), profile)
 
     def option_pairs(self, source: object = None) -> OptionPairs:
         """This protocol's options as ``source`` has them, as (line key, value) pairs."""

@@ -131,7 +131,7 @@ async def capture(
                 for frame in body["frames"]:
                     if anchor_us is None:
                         anchor_us = round(frame["time"] * 1e6) - round(frame["mono"] * 1e6)
-                    _write(file, frame, anchor_us, missed)
+                    _write(file, frame, anchor_us, missed, interface.link_type)
                     counts[frame["dir"]] = counts.get(frame["dir"], 0) + 1
                     missed = 0
                 file.flush()
@@ -150,7 +150,9 @@ async def capture(
     return 0
 
 
-def _write(file: BinaryIO, frame: dict[str, Any], anchor_us: int, missed: int) -> None:
+def _write(
+    file: BinaryIO, frame: dict[str, Any], anchor_us: int, missed: int, link_type: int
+) -> None:
     direction = pcapng.OUTBOUND if frame["dir"] == "tx" else pcapng.INBOUND
     comment = f"{missed} frames missed before this one" if missed else ""
     packet = Packet(
@@ -162,4 +164,4 @@ def _write(file: BinaryIO, frame: dict[str, Any], anchor_us: int, missed: int) -
         direction=direction,
         comment=comment,
     )
-    file.write(pcapng.enhanced_packet(packet))
+    file.write(pcapng.enhanced_packet(packet, link_type))

@@ -53,6 +53,8 @@ class _Drive:
             reply = None
             for exchange in exchanges:
                 reply = await self.session.link.transact(exchange)
+                if exchange.settle_s:  # the drive's pacing (a Yaskawa after a write), kept
+                    await self.session.clock.sleep(exchange.settle_s)  # whatever the reply
                 if reply is None or reply.error is not None:
                     break
             if reply is not None:
@@ -87,6 +89,17 @@ class _Drive:
             port = self.session.plan.port
             raise BusError(f"no reply from address {self.address} on {port}")
         return reply.status is None or reply.status.running  # no status: assume the worst
+
+
+def _set_of(options: LineOptions) -> SetProfile:
+    """The set of the line's drives; UsageError when none is known (a profile names it)."""
+    found = profile_for(options.protocol, options)
+    if not found.members:
+        raise UsageError(
+            f"no parameter set is known for {options.protocol} drives here: a drive "
+            "profile lists it (--profile)"
+        )
+    return found
 
 
 def _progress(done: int, total: int, what: str) -> None:
@@ -139,7 +152,7 @@ def dump(found: ParameterSet) -> str:
 
 async def backup(options: LineOptions, address: int, output: Path | None) -> int:
     """Read every member and the identity; write the YAML (stdout when no file)."""
-    profile = profile_for(options.protocol)
+    profile = _set_of(options)
     async with _Session(options.plan()) as session:
         found = await _read_drive(_Drive(session, address), profile)
     text = dump(found)
@@ -186,7 +199,7 @@ async def diff(options: LineOptions | None, address: int | None, files: list[Pat
                 f"{files[0]} is a {left.protocol} set; the line is {options.protocol} (--protocol)"
             )
         async with _Session(options.plan()) as session:
-            right = await _read_drive(_Drive(session, address), profile_for(options.protocol))
+            right = await _read_drive(_Drive(session, address), _set_of(options))
         labels = (str(files[0]), f"drive {address}")
     differences = compare(left, right)
     if not differences:
@@ -213,7 +226,7 @@ async def restore(
     ``force``, a frequency ceiling above the drive's ``max_frequency_hz`` in ``config``.
     """
     saved = load(path)
-    profile = profile_for(options.protocol)
+    profile = _set_of(options)
     if saved.protocol != options.protocol:
         raise UsageError(
             f"{path} is a {saved.protocol} set; the line is {options.protocol} (--protocol)"

@@ -92,3 +92,33 @@ async def test_a_drives_set_is_read_through_the_bus_and_drift_is_reported() -> N
     assert {e["command"] for e in reads if e["actor"] in by_actor} == {"read", "write"}
     assert len(by_actor["scada"]) == 5 + 19
     assert len([e for e in by_actor["ops"] if e["command"] == "read"]) == 5 * (5 + 19)
+
+
+MODBUS_CONFIG = """
+buses:
+  - name: rtu
+    port: sim://rtu
+    protocol: modbus-rtu
+    baudrate: 115200
+    drives:
+      - {{name: yaskawa, address: 4, control: bus, profile: yaskawa-memobus}}
+http:
+  listen: 127.0.0.1:{port}
+  tokens:
+    - {{name: ops, role: operator, token: "{operator}"}}
+"""
+
+
+async def test_a_modbus_drives_set_over_http_is_its_profiles() -> None:
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    text = MODBUS_CONFIG.format(port=port, operator=OPERATOR["Authorization"].split()[-1])
+    async with running(text, url), httpx.AsyncClient(base_url=url, timeout=30) as client:
+        response = await client.get("/api/v1/drives/yaskawa/parameters", headers=OPERATOR)
+        assert response.status_code == 200, response.text
+        saved = response.json()
+        assert (saved["protocol"], saved["address"]) == ("modbus-rtu", 4)
+        assert list(saved["parameters"]) == ["hr512", "hr513", "hr1077", "hr1064", "hr1065"]
+        assert saved["parameters"]["hr512"] == {
+            "name": "C1-01 Acceleration Time 1", "value": 10.0, "unit": "s", "raw": 100,
+        }  # fmt: skip

@@ -10,13 +10,15 @@ its steady control word written (the last word of the sequence of what it was co
 many families' watchdogs are fed only by control word writes (ABB 58.15 = Cw/Ref1/Ref2).
 
 Commands write the profile's sequence of control words, one exchange each, so each step is
-acknowledged before the next; a run writes the reference first. A reference change while
-the drive is commanded to run writes only the reference: sending a state machine's start
-sequence again would pass a running CiA 402 drive through "shutdown".
+acknowledged before the next (and the profile's ``between_steps_s`` passes between them); a
+run writes the reference first. A reference change while the drive is commanded to run
+writes only the reference: sending a state machine's start sequence again would pass a
+running CiA 402 drive through "shutdown".
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import Final
 
@@ -222,6 +224,9 @@ class ModbusCodec:
             self._write(address, profile.control, (w,), carries_control=True)
             for w in self._words(profile, intent)
         )
+        between = profile.pacing.between_steps_s
+        if between:  # the family's wait between the steps of a sequence, not after the last
+            exchanges[:-1] = [dataclasses.replace(e, settle_s=between) for e in exchanges[:-1]]
         return tuple(exchanges)
 
     def _words(self, profile: DriveProfile, intent: ControlIntent) -> tuple[int, ...]:
@@ -268,13 +273,18 @@ class ModbusCodec:
         """Write one register (FC 6) or a 32-bit pair (FC 16), in the profile's scaling.
 
         ``persist`` changes nothing: whether a register write survives a power cycle is
-        each family's own rule (ABB: never, until 96.07 saves it).
+        each family's own rule (ABB: never, until 96.07 saves it). The exchange carries the
+        profile's wait after a parameter write (``settle_s``), which the bus keeps.
         """
         _no_index(index)
         if isinstance(value, str):
             raise UsageError(f"{parameter.name}: only numbers can be written to a register")
-        register = scaled(self._known(address), key_register(parameter))
-        return (self._write(address, register, register.raw(value), parameter=parameter),)
+        profile = self._known(address)
+        register = scaled(profile, key_register(parameter))
+        exchange = self._write(address, register, register.raw(value), parameter=parameter)
+        if profile is not None and profile.pacing.after_write_s:
+            exchange = dataclasses.replace(exchange, settle_s=profile.pacing.after_write_s)
+        return (exchange,)
 
     # ------------------------------------------------------------------ replies
 

@@ -5,9 +5,10 @@ one family: which registers hold the control word, the reference, the status wor
 output frequency and the fault; which control words, written in order, start, stop, coast,
 quick-stop or reset the drive (a state machine's sequence where the family has one: CiA 402
 0x06 → 0x07 → 0x0F); which status bits mean running, fault, warning, at reference; the
-fault texts; the drive's own communication watchdog; values worth watching; and pacing
-rules. Built-in profiles live in :mod:`fcmaster.protocol.modbus_rtu.profiles`; a user's own
-is read from YAML by :mod:`fcmaster.protocol.modbus_rtu.profile_file`.
+fault texts; the drive's own communication watchdog; values worth watching; settings a
+backup keeps; and pacing rules. Built-in profiles live in
+:mod:`fcmaster.protocol.modbus_rtu.profiles`; a user's own is read from YAML by
+:mod:`fcmaster.protocol.modbus_rtu.profile_file`.
 
 Addresses are zero-based PDU addresses (holding register 40001 is 0). A register's value is
 ``raw * scale`` in its unit; a reference or output frequency in ``%`` is a share of the
@@ -139,8 +140,8 @@ class WatchdogProfile:
 class Pacing:
     """Waits a family asks for beyond the 3.5-character silence.
 
-    Recorded from the manuals; the bus does not apply them yet (a line's ``pause_s`` can
-    stand in for ``between_steps_s`` meanwhile).
+    The codec puts them on the exchanges they follow (``Exchange.settle_s``) and the bus
+    keeps them for that drive alone: the line's other drives are served meanwhile.
     """
 
     after_write_s: float = 0.0  # after a parameter write, before the next request
@@ -165,6 +166,9 @@ class DriveProfile:
     faults: Mapping[int, str] = field(default_factory=dict)
     watchdog: WatchdogProfile = field(default_factory=WatchdogProfile)
     values: tuple[Value, ...] = ()
+    # Settings a backup keeps (``fcmaster params``): writable registers, by manual name. The
+    # watchdog's registers are kept too, after these.
+    parameters: tuple[Value, ...] = ()
     pacing: Pacing = field(default_factory=Pacing)
     sources: tuple[str, ...] = ()  # the manuals and pages each fact came from
     unverified: tuple[str, ...] = ()  # facts not checked against a manual page
@@ -249,10 +253,15 @@ def profile_problems(profile: DriveProfile) -> list[tuple[str, str]]:
             )
         if not 0 <= bit <= 15:
             problems.append((f"status_bits.{name}", f"{bit} is not a bit of a 16-bit word (0-15)"))
-    for i, value in enumerate(profile.values):
-        problems += [(f"values[{i}].{k}", r) for k, r in register_problems(value.register)]
-        if not value.name:
-            problems.append((f"values[{i}].name", "must not be empty"))
+    for key, listed in (("values", profile.values), ("parameters", profile.parameters)):
+        for i, value in enumerate(listed):
+            path = f"{key}[{i}]"
+            problems += [(f"{path}.{k}", r) for k, r in register_problems(value.register)]
+            if not value.name:
+                problems.append((f"{path}.name", "must not be empty"))
+    for i, value in enumerate(profile.parameters):
+        if value.register.input:
+            problems.append((f"parameters[{i}].input", "a setting is a holding register"))
     for name in ("timeout", "action", "enable"):
         register = getattr(profile.watchdog, name)
         if register is not None:

@@ -16,6 +16,7 @@ The file has the shape of :class:`~.profile.DriveProfile`::
     watchdog: {timeout: {address: 600, scale: 0.1}, action: {address: 601},
                actions: {0: {action: "off", stops: false}, 1: {action: "trip", stops: true}}}
     values: [{name: "Motor Current", address: 515, scale: 0.1, unit: A}]
+    parameters: [{name: "Acceleration time", address: 600, scale: 0.1, unit: s}]
     pacing: {after_write_s: 0.01}
 
 Nothing here reads a file: the caller hands the text over and names where it came from, so
@@ -44,7 +45,7 @@ from fcmaster.protocol.modbus_rtu.profile import (
 _TOP: Final = frozenset(
     {
         "name", "title", "state_machine", "registers", "commands", "status_bits", "faults",
-        "fault_bits", "watchdog", "values", "pacing", "sources", "unverified",
+        "fault_bits", "watchdog", "values", "parameters", "pacing", "sources", "unverified",
     }
 )  # fmt: skip
 _REGISTER_KEYS: Final = frozenset({"address", "scale", "unit", "input", "signed", "words"})
@@ -110,6 +111,7 @@ def parse_profile(data: object, where: str = "") -> DriveProfile:
         for k, v in _mapping(data, "faults", problems).items()
     }
     values = _values(data.get("values", []), problems)
+    parameters = _values(data.get("parameters", []), problems, "parameters")
     watchdog = _watchdog(_mapping(data, "watchdog", problems), problems)
     pacing_data = _mapping(data, "pacing", problems)
     pacing = Pacing(
@@ -140,6 +142,7 @@ def parse_profile(data: object, where: str = "") -> DriveProfile:
         faults=faults,
         watchdog=watchdog,
         values=values,
+        parameters=parameters,
         pacing=pacing,
         sources=tuple(_texts(data.get("sources", []), "sources", problems)),
         unverified=tuple(_texts(data.get("unverified", []), "unverified", problems)),
@@ -250,13 +253,13 @@ def _unit(value: object, path: str, problems: Problems) -> str:
     return ""
 
 
-def _values(value: object, problems: Problems) -> tuple[Value, ...]:
+def _values(value: object, problems: Problems, key: str = "values") -> tuple[Value, ...]:
     if not isinstance(value, list):
-        problems.append(("values", "must be a list of {name, address, …}"))
+        problems.append((key, "must be a list of {name, address, …}"))
         return ()
     values = []
     for i, item in enumerate(value):
-        path = f"values[{i}]"
+        path = f"{key}[{i}]"
         if not isinstance(item, dict):
             problems.append((path, f"must be a mapping with name and address, not {item!r}"))
             continue

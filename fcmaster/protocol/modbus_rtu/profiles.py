@@ -97,6 +97,10 @@ ABB_DRIVES: Final = DriveProfile(
         ),
         Value(name="DC voltage", register=Register(address=110, scale=0.01, unit="V")),
     ),
+    parameters=(
+        Value(name="Acceleration time 1", register=Register(address=2311, scale=0.1, unit="s")),
+        Value(name="Deceleration time 1", register=Register(address=2312, scale=0.1, unit="s")),
+    ),
     sources=_ABB_MANUALS,
     unverified=(
         "The classic register map is the ACS850's; ACS580 with 58.33 = mode 0 is assumed the same",
@@ -105,6 +109,7 @@ ABB_DRIVES: Final = DriveProfile(
         "04.01 Tripping fault at register 400401; fault code texts other than 6681",
         "58.14 value 0 = no action, 1 = fault, 2 = last speed; 58.16 in 0.1 s units",
         "01.07, 01.10, 01.11 register scaling (FbEq16)",
+        "23.12/23.13 at 402312/402313 (the xx.yy → 4xxyy rule of 58.14) and their 0.1 s scaling",
     ),
 )
 
@@ -188,7 +193,7 @@ SINAMICS_V20: Final = DriveProfile(
 
 ALTIVAR_CIA402: Final = DriveProfile(
     name="altivar-cia402",
-    title="Schneider Altivar (ATV320/340/600/900) with the CiA 402 profile (CHCF = SE8)",
+    title="Schneider Altivar (ATV320/340/600/900) with the CiA 402 profile (CHCF = SIM or SEP)",
     state_machine=StateMachine.CIA402,
     control=Register(address=8501),  # CMD
     reference=Register(address=8502, scale=0.1, unit="Hz", signed=True),  # LFR
@@ -235,33 +240,51 @@ ALTIVAR_CIA402: Final = DriveProfile(
     watchdog=WatchdogProfile(
         timeout=Register(address=6005, scale=0.1, unit="s"),  # TTO Modbus timeout
         action=Register(address=7002),  # SLL Modbus fault management
+        # Only what the readings of the option list agree on; 3 and 5 read as a stop in one
+        # and as running on in another, so they are judged unknown, never ok.
         actions={
             0: ("ignore", False),
             1: ("freewheel stop", True),
-            2: ("ramp stop", True),
-            3: ("fast stop", True),
+            2: ("ramp stop", True),  # or "stop by the stop type (Stt)", a ramp by default
+            3: ("fast stop or fallback speed", None),
             4: ("fallback speed", False),
-            5: ("speed maintained", False),
+            5: ("speed maintained or ramp stop", None),
         },
     ),
     values=(
         Value(name="Motor current", register=Register(address=3204, scale=0.1, unit="A")),
-        Value(name="DC bus voltage", register=Register(address=3207, scale=0.1, unit="V")),
+        Value(name="Mains voltage", register=Register(address=3207, scale=0.1, unit="V")),
         Value(name="Motor thermal state", register=Register(address=3209, unit="%")),
+    ),
+    parameters=(
+        Value(name="ACC Acceleration", register=Register(address=9001, scale=0.1, unit="s")),
+        Value(name="DEC Deceleration", register=Register(address=9002, scale=0.1, unit="s")),
     ),
     sources=(
         "ATV600 Communication Parameters EAV64332 V1.5 (spreadsheet): two logic addresses "
         "for CMD and ETA; 'speed' addresses in rpm, 'frequency' addresses in Hz",
         "CiA 402 / IEC 61800-7-201 drive state machine: 0x06 shutdown, 0x07 switch on, "
         "0x0F enable operation, 0x80 fault reset; status bits 0-3, 5, 6 give the state",
+        "ATV12 Modbus Communication Manual BBV28590: CMD 8501 written 6, 7, 15 to run; ETA "
+        "3201, ETA & 0x006F = 0x0037 operation enabled; the write example at W9001 (ACC)",
+        "ATV312 Modbus manual BBV52816: CMD 8501, LFR 8502, ETA 3201, RFR 3202, faults from "
+        "7121 (LFT), communication settings 6001-6005; HSP/LSP at 3104/3105 in 0.1 Hz",
+        "Altivar Machine ATV320 communication parameters (NVE41316): TTO at 6005 in 0.1 s, "
+        "ACC 9001 and DEC 9002 in 0.1 s",
+        "The last three as transcribed from those documents into public register maps; "
+        "their pages themselves were not seen",
     ),
     unverified=(
-        "Every logic address (CMD 8501, LFR 8502, ETA 3201, RFR 3202, LFT 7121, TTO 6005, "
-        "SLL 7002, LCR 3204, ULN 3207, THR 3209): from the Altivar communication parameter "
-        "lists, not checked page by page",
-        "CMD bit 11 as reverse, ETA bit 15 as reverse rotation",
+        "The addresses above are checked on ATV12/ATV312/ATV320 lists, not on ATV340, ATV600 "
+        "or ATV900 pages; SLL 7002, LCR 3204, ULN 3207, THR 3209 not checked at all",
+        "CMD bit 11 as reverse, ETA bit 15 as reverse rotation, ETA bit 9 as remote, bit 10 "
+        "as target reached",
         "LFT fault numbers and their texts",
-        "SLL option values",
+        "SLL option values: 0 ignore and 1 freewheel agree in every reading; 2-5 do not (an "
+        "option list nO, YES, Stt, LFF, rLS, rMP, FSt, dCI would make 3 a fallback speed and "
+        "5 a ramp stop), so 3 and 5 are judged unknown",
+        "CiA 402 with CHCF = SIM (not separate, the factory setting) or SEP; SE8 is the "
+        "ATV58-compatible profile, not CiA 402",
     ),
 )
 
@@ -315,6 +338,14 @@ YASKAWA_MEMOBUS: Final = DriveProfile(
         Value(name="Output current", register=Register(address=0x0026, scale=0.1, unit="A")),
         Value(name="DC bus voltage", register=Register(address=0x0031, unit="V")),
     ),
+    parameters=(
+        Value(
+            name="C1-01 Acceleration Time 1", register=Register(address=0x0200, scale=0.1, unit="s")
+        ),
+        Value(
+            name="C1-02 Deceleration Time 1", register=Register(address=0x0201, scale=0.1, unit="s")
+        ),
+    ),
     # A parameter written by MEMOBUS takes effect after an Enter command; the drive needs
     # time before it answers again.
     pacing=Pacing(after_write_s=0.01),
@@ -332,6 +363,7 @@ YASKAWA_MEMOBUS: Final = DriveProfile(
         "Fault code numbers of U2-01 and their texts",
         "H5-04/H5-05/H5-09 register addresses 0428H/0429H/0435H",
         "The 10 ms wait after a parameter write",
+        "C1-01/C1-02 at 0200H/0201H in 0.1 s (C1-10 = 1)",
     ),
 )
 
@@ -378,6 +410,16 @@ DANFOSS_FC_MODBUS: Final = DriveProfile(
         ),
         Value(name="DC link voltage", register=Register(address=16299, words=2, unit="V")),
         Value(name="Power", register=Register(address=16099, words=2, scale=0.01, unit="kW")),
+    ),
+    parameters=(
+        Value(
+            name="3-41 Ramp 1 Ramp Up Time",
+            register=Register(address=3409, words=2, scale=0.01, unit="s"),
+        ),
+        Value(
+            name="3-42 Ramp 1 Ramp Down Time",
+            register=Register(address=3419, words=2, scale=0.01, unit="s"),
+        ),
     ),
     sources=(
         f"{_FC202} p. 175, table 7.15: holding registers 50000 CTW, 50010 REF, 50200 STW, "

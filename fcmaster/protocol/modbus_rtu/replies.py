@@ -98,7 +98,7 @@ def value_of(
 ) -> ParameterValue:
     """The value of the register ``key`` names, in the profile's scaling and by its name."""
     register = scaled(profile, key_register(key))
-    listed = profile.values if profile is not None else ()
+    listed = (*profile.values, *profile.parameters) if profile is not None else ()
     title = next((v.name for v in listed if same_register(v.register, register)), "")
     raw = 0
     for word in words:
@@ -117,7 +117,7 @@ def scaled(profile: DriveProfile | None, register: Register) -> Register:
     """``register`` with the scaling the profile gives it, if the profile lists it."""
     if profile is None:
         return register
-    listed = [v.register for v in profile.values]
+    listed = [v.register for v in (*profile.values, *profile.parameters)]
     listed += profile.watchdog.registers
     listed += [profile.reference, profile.output_frequency]
     return next((r for r in listed if same_register(r, register)), register)

@@ -14,6 +14,7 @@ from typing import Final
 from fcmaster.protocol.codec import DriveCodec
 from fcmaster.protocol.modbus_rtu.codec import ModbusCodec
 from fcmaster.protocol.modbus_rtu.describe import describe_frame
+from fcmaster.protocol.modbus_rtu.parameter_tables import tables_of
 from fcmaster.protocol.modbus_rtu.profile import DriveProfile
 from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
 from fcmaster.protocol.modbus_rtu.watchdog import WATCHDOG, profile_facts
@@ -66,6 +67,13 @@ def _profiled(
     return ModbusCodec(chosen, nominal_hz, default)
 
 
+def _tables(options: ModbusOptions, profile: object) -> ParameterTables:
+    """The set of a drive with ``profile`` (a DrivePlan's), else the line's ``profile``."""
+    if not isinstance(profile, DriveProfile):
+        profile = None if options.profile is None else BUILT_IN[options.profile]
+    return tables_of(profile)
+
+
 SPEC: Final[ProtocolSpec[ModbusOptions]] = ProtocolSpec(
     name="modbus-rtu",
     manufacturer="Modbus RTU drive",
@@ -87,14 +95,8 @@ SPEC: Final[ProtocolSpec[ModbusOptions]] = ProtocolSpec(
     baudrates=(115200, 57600, 38400, 19200, 9600, 4800, 2400, 1200),
     parities=("E", "N", "O"),
     status_bits=StatusBit,
-    parameters=ParameterTables(
-        set_members=(),
-        identity=(),
-        identity_match=frozenset(),
-        changeable_while_running=frozenset(),
-        link_settings=frozenset(),
-        unit_of=lambda _key: "",
-    ),
+    parameters=tables_of(None),
+    parameters_for=_tables,
     describe=describe_frame,
     checksum_key="crc_ok",
     diagnosis=DiagnosisParameters(
@@ -104,7 +106,7 @@ SPEC: Final[ProtocolSpec[ModbusOptions]] = ProtocolSpec(
         delay="its response delay parameter",
         factory_delay_s=0.0,
     ),
-    link_type=150,  # pcapng USER3
+    link_type=250,  # pcapng RTAC_SERIAL: Wireshark decodes its payload as Modbus RTU
     simulator="fcmaster.sim.modbus_rtu.simulator:SIMULATOR",
     watchdog=WATCHDOG,
     watchdog_of_profile=profile_facts,

@@ -6,7 +6,8 @@ output frequency, the fault register, the monitored values and the watchdog regi
 any register preset in ``DriveSettings.parameters`` (``{"hr600": 30}``, raw values). Any
 other register is answered with exception 02 (illegal data address), a write to a register
 that is only read with 02 too, a request with a bad CRC not at all (Serial Line §2.5.1.2),
-a broadcast (address 0) obeyed and not answered.
+a broadcast (address 0) obeyed and not answered. After a parameter write it hears nothing
+for its profile's ``pacing.after_write_s``, as the family's drives do.
 
 Which profile: ``DriveSettings.profile`` (a built-in's name or a profile), else the line's
 ``profile`` (``fcmaster sim --profile``), else the built-ins in turn by address (1 ABB
@@ -104,6 +105,14 @@ class ModbusSimDrive:
         for register in self.profile.watchdog.registers:
             for offset in range(register.words):
                 self.stored[(register.input, register.address + offset)] = 0
+        for setting in self.profile.parameters:  # a factory-like 10 s (ramps, mostly)
+            register = setting.register
+            try:
+                words = register.raw(10.0)
+            except UsageError:
+                words = (0,) * register.words
+            for offset, word in enumerate(words):
+                self.stored[(register.input, register.address + offset)] = word
         for name, value in settings.parameters.items():
             if name in ("ramp_up_s", "ramp_down_s"):
                 continue
@@ -112,6 +121,11 @@ class ModbusSimDrive:
                 self.stored[(register.input, register.address + offset)] = word
         self._control_word = 0
         self._heard_at: float | None = None
+        # The profile's pacing: after a parameter write the drive hears nothing for a while
+        # (a Yaskawa storing it); requests it missed are counted, for the tests.
+        self._busy_until = -1.0
+        self.unheard = 0
+        self._char_s = (line or LineSettings()).char_bits / (line or LineSettings()).baudrate
         self._reference_words: tuple[int, ...] = (0,) * self.profile.reference.words
         if settings.running_hz:
             self._adopt_running(settings.running_hz, now)
@@ -135,6 +149,9 @@ class ModbusSimDrive:
         """Act on a request that ended at ``now``; return the answer, or None."""
         if frame[0] not in (BROADCAST, self._address):
             return None
+        if now - len(frame) * self._char_s < self._busy_until:  # it began too soon
+            self.unheard += 1
+            return None
         try:
             request = decode_request(frame)
         except MalformedReply:
@@ -149,6 +166,8 @@ class ModbusSimDrive:
             response = ExceptionReply(
                 address=self._address, function=_function(request), code=refusal.code
             )
+        else:
+            self._paced(request, response, now)
         return None if broadcast else encode_response(response)
 
     def _serve(self, request: Request, now: float) -> Response:
@@ -230,6 +249,16 @@ class ModbusSimDrive:
             else:
                 raise Refused(ExceptionCode.ILLEGAL_DATA_ADDRESS)
         self._follow(now)
+
+    def _paced(self, request: Request, response: Response, now: float) -> None:
+        """After a parameter write, deaf for the profile's wait from the end of its answer."""
+        wait = self.profile.pacing.after_write_s
+        if not wait or isinstance(request, ReadRequest):
+            return
+        start = request.register if isinstance(request, WriteSingle) else request.start
+        if (False, start) in self.stored:  # not the control word or the reference
+            answer = len(encode_response(response)) * self._char_s
+            self._busy_until = now + self.response_delay_s + answer + wait
 
     # ------------------------------------------------------------------ the drive
 
@@ -354,6 +383,8 @@ def _reading(name: str, register: Register, motor: Motor) -> Callable[[], float]
     words = name.lower()
     if "current" in words:
         return lambda: motor.current_a
+    if "mains" in words:  # a six-pulse bridge's DC link is about 1.35 times the mains
+        return lambda: motor.dc_link_v / 1.35
     if "voltage" in words:
         return lambda: motor.dc_link_v
     if "power" in words:

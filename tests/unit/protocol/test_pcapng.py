@@ -106,8 +106,46 @@ def test_what_is_not_pcapng_is_refused_clearly(data: bytes) -> None:
 def test_every_protocol_has_its_own_private_link_type() -> None:
     codes = list(pcapng.LINK_TYPES.values())
     assert len(set(codes)) == len(codes)
-    assert all(147 <= code <= 162 for code in codes)
+    # private-use USER types, but Modbus RTU, which a registered type's dissector knows
+    assert all(147 <= code <= 162 for p, code in pcapng.LINK_TYPES.items() if p != "modbus-rtu")
+    assert pcapng.LINK_TYPES["modbus-rtu"] == pcapng.RTAC_SERIAL == 250
     assert struct.calcsize("<IIIII") == 20
+
+
+# A Modbus RTU request and its answer at 2026-09-21T14:13:20.000123Z, as an RTAC serial
+# packet: 12 bytes of header (seconds, microseconds, event 1 sent / 2 received, control
+# lines, footer), then the frame.
+RTAC_SENT = h(
+    "06000000 40000000 00000000 fe5b0600 7be025da 14000000 14000000"  # EPB, 20 bytes
+    " 6ab13b80 0000007b 01 00 0000"  # 1790000000 s, 123 µs (big-endian), sent, lines, footer
+    " 01030003 0002340b"  # the frame
+    " 0200 0400 02000000 0000 0000 40000000"  # epb_flags outbound, end, length
+)
+
+
+def test_a_modbus_rtu_frame_goes_under_the_rtac_serial_header() -> None:
+    request = h("01030003 0002340b")
+    packet = Packet(0, 1_790_000_000_000_123, request, direction=pcapng.OUTBOUND)
+    assert pcapng.enhanced_packet(packet, pcapng.RTAC_SERIAL) == RTAC_SENT
+    answer = pcapng.enhanced_packet(
+        Packet(0, 1_790_000_000_000_123, b"\x01", direction=pcapng.INBOUND), pcapng.RTAC_SERIAL
+    )
+    assert answer[28 + 8] == 0x02  # received
+    rtu = Interface(link_type=pcapng.RTAC_SERIAL, name="rtu", description="modbus-rtu 19200 8E1")
+    (read,) = pcapng.decode(SHB + pcapng.interface_description(rtu) + RTAC_SENT).packets
+    assert read == packet  # the header is taken off: the data is the frame
+
+
+def test_an_rtac_serial_packet_without_flags_is_told_by_its_event() -> None:
+    rtu = Interface(link_type=pcapng.RTAC_SERIAL, name="rtu")
+    flagless = h(
+        "06000000 30000000 00000000 00000000 00000000 0d000000 0d000000"
+        " 00000000 00000000 02 00 0000 01 000000 30000000"  # received, no epb_flags
+    )
+    (read,) = pcapng.decode(SHB + pcapng.interface_description(rtu) + flagless).packets
+    assert (read.data, read.direction) == (b"\x01", pcapng.INBOUND)
+    with pytest.raises(PcapngError, match="12-byte header"):
+        pcapng.decode(SHB + pcapng.interface_description(rtu) + EPB)
 
 
 interfaces = st.builds(

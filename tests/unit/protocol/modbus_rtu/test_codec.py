@@ -3,6 +3,8 @@ wire for each profile, and what each answer means."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from fcmaster.errors import UnexpectedReply, UsageError
@@ -19,6 +21,7 @@ from fcmaster.protocol.modbus_rtu import (
 )
 from fcmaster.protocol.modbus_rtu.codec import ModbusCodec
 from fcmaster.protocol.modbus_rtu.keys import CONTROL_FEED, FAULT_CODE, OUTPUT_FREQUENCY
+from fcmaster.protocol.modbus_rtu.profile import Pacing
 from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
 from fcmaster.protocol.registry import spec_for
 from fcmaster.subcommands.commission import LineOptions
@@ -252,3 +255,28 @@ def test_the_lines_profile_serves_drives_without_their_own() -> None:
         ).plan()
     )
     assert writes(codec.control(3, STOP)) == [(0, 0x047E)]
+
+
+# ---------------------------------------------------------------- pacing
+
+
+def test_a_parameter_write_carries_the_profiles_wait_after_it() -> None:
+    (yaskawa,) = CODEC.write(YASKAWA, CODEC.parameter("hr512"), 0, 20.0, None)
+    (abb,) = CODEC.write(ABB, CODEC.parameter("hr512"), 0, 20.0, None)
+    assert yaskawa.settle_s == pytest.approx(0.01)  # Yaskawa: after a parameter write
+    assert abb.settle_s == 0.0
+    # the control word a poll feeds is no parameter write: no wait
+    assert CODEC.poll(YASKAWA, STOP, CONTROL_FEED).settle_s == 0.0
+    assert all(e.settle_s == 0.0 for e in CODEC.read(YASKAWA, CODEC.parameter("hr512"), 0, None))
+
+
+def test_the_steps_of_a_sequence_carry_the_wait_between_them_but_not_the_last() -> None:
+    profile = dataclasses.replace(
+        BUILT_IN["altivar-cia402"], pacing=Pacing(between_steps_s=0.05, after_write_s=0.02)
+    )
+    codec = ModbusCodec({ATV: profile}, {ATV: 50.0})
+    start = codec.control(ATV, ControlIntent(Motion.RUN, reference_pct=50.0))
+    assert [e.settle_s for e in start] == [0.05, 0.05, 0.05, 0.0]  # reference, 6, 7, then 0F
+    assert [e.settle_s for e in codec.control(ATV, STOP)] == [0.0]
+    (write,) = codec.write(ATV, codec.parameter("hr600"), 0, 1.0, None)
+    assert write.settle_s == pytest.approx(0.02)

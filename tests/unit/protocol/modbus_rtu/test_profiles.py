@@ -10,6 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from fcmaster.errors import ConfigError, UsageError
+from fcmaster.protocol.modbus_rtu.keys import parse_register
+from fcmaster.protocol.modbus_rtu.parameter_tables import members, tables_of
 from fcmaster.protocol.modbus_rtu.profile import (
     Register,
     StateMachine,
@@ -108,6 +110,17 @@ def test_abb_watchdog_settings() -> None:
     assert (fault.timeout_s, fault.action, fault.stops) == (3.0, "fault", True)
     assert watchdog.setting([3.0, 0]).stops is False
     assert watchdog.setting([3.0, 2]).action == "last speed"
+
+
+def test_altivar_sll_options_the_readings_disagree_on_are_not_taken_as_a_stop() -> None:
+    watchdog = BUILT_IN["altivar-cia402"].watchdog
+    assert watchdog.setting([2.0, 1]).stops is True  # freewheel
+    assert watchdog.setting([2.0, 2]).stops is True  # ramp stop, or Stt (a ramp by default)
+    assert watchdog.setting([2.0, 0]).stops is False  # ignore
+    # fast stop or fallback speed; speed maintained or ramp stop: the verdict stays unknown
+    assert watchdog.setting([2.0, 3]).stops is None
+    assert watchdog.setting([2.0, 5]).stops is None
+    assert watchdog.setting([2.0, 7]).stops is None  # no reading for it at all
 
 
 def test_v20_watchdog_is_off_at_zero() -> None:
@@ -245,3 +258,27 @@ def test_a_watchdog_action_register_without_its_meanings_reads_as_unknown() -> N
     )
     setting = parse_profile_text(text).watchdog.setting([2.0, 1])
     assert (setting.timeout_s, setting.action, setting.stops) == (2.0, "option 1", None)
+
+
+def test_a_profiles_settings_make_up_its_parameter_set_then_its_watchdog() -> None:
+    text = USER_PROFILE + (
+        'parameters: [{name: "Acceleration", address: 600, scale: 0.1, unit: s},\n'
+        '             {name: "Deceleration", address: 602, scale: 0.1, unit: s}]\n'
+    )
+    profile = parse_profile_text(text)
+    assert [v.name for v in profile.parameters] == ["Acceleration", "Deceleration"]
+    # 600 is the watchdog's timeout too: one member, under the setting's name
+    assert members(profile) == (
+        ("hr600", "Acceleration"),
+        ("hr602", "Deceleration"),
+        ("hr601", "Communication watchdog action"),
+    )
+    tables = tables_of(profile)
+    assert tables.unit_of(parse_register("hr602")) == "s"
+    assert tables.unit_of(parse_register("hr515")) == "A"  # a monitored value's unit too
+    assert tables_of(None).set_members == ()
+    found = problems_of(
+        USER_PROFILE + "parameters: [{name: x, address: 3, input: true}, {address: 4}]\n"
+    )
+    assert found["my.yaml: parameters[0].input"] == "a setting is a holding register"
+    assert "not None" in found["my.yaml: parameters[1].name"]
