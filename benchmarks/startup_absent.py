@@ -38,7 +38,6 @@ from typing import Any
 
 import results_file
 from bus_faults import BAUD, DELAY_S, PRESENT, Replies, simulator
-from fcmaster.bus.serial import SerialTransport
 
 import fcmaster
 from fcmaster import logsetup
@@ -47,6 +46,7 @@ from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.clock import MonotonicClock, new_event_loop
 from fcmaster.protocol.danfoss_fc import ControlWord, decode_telegram
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
+from fcmaster.transport.serial import SerialTransport
 
 CONFIGURED = 126
 WINDOWS = ((3.0, 20.0), (20.0, 40.0))
