@@ -158,18 +158,32 @@ async def serve(child: Child, hello: dict[str, Any]) -> None:
 
 
 async def main(fd: int) -> int:
-    """Serve over the socket ``fd``; 0 when the daemon closed the pipe."""
+    """Serve over the socket ``fd``; 0 when the daemon closed the pipe, 1 when serving failed.
+
+    Whatever happens is logged as the daemon logs (JSON lines on the shared stderr), never
+    as a bare traceback.
+    """
+    logsetup.configure("info", "json")
     sock = socket.socket(fileno=fd)
     reader, writer = await asyncio.open_unix_connection(sock=sock)
     child = Child(reader, writer)
-    hello = await child.next_message()
-    if hello is None or hello.get("t") != "hello":
-        return 2
-    logsetup.configure(hello["settings"].get("log_level", "info"), "json")
-    logging.getLogger("asyncua").setLevel(logging.ERROR)
-    logging.getLogger("asyncua").addHandler(_Library())
-    logging.getLogger("asyncua").propagate = False
-    await serve(child, hello)
+    try:
+        hello = await child.next_message()
+        if hello is None or hello.get("t") != "hello":
+            log.error("opcua.server_failed", reason="the daemon sent no hello")
+            return 1
+        logsetup.configure(hello["settings"].get("log_level", "info"), "json")
+        library = logging.getLogger("asyncua")
+        library.setLevel(logging.WARNING)
+        library.addHandler(_Library())
+        library.propagate = False
+        await serve(child, hello)
+    except OSError as exc:  # the port is taken, the pki unwritable: the daemon retries
+        log.error("opcua.server_failed", reason=f"{exc.strerror or exc}")
+        return 1
+    except Exception:  # a bug: said in the log, and the daemon starts a new server
+        log.exception("opcua.server_failed")
+        return 1
     return 0
 
 

@@ -5,12 +5,16 @@ endpoints are offered; the client's certificate is refused and filed, then trust
 `fcmaster opcua trust`; a viewer browses and reads every quality state the simulator drives
 (a drive never heard, a live one, one that fell silent), cannot call or write; an operator
 subscribes, starts a drive by its method and sees the change; the line goes down (the
-simulator stops) and the values turn Uncertain with their last value.
+simulator stops) and the values turn Uncertain with their last value. On the way the server
+process is killed: the daemon starts another, which shows the same, and the line never
+noticed.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import signal
 from pathlib import Path
 from typing import Any
 
@@ -98,6 +102,7 @@ async def test_scada_connects_trusts_reads_qualities_and_commands(tmp_path: Path
             await _trust_the_client(plan, tmp_path, config, daemon)
             await _viewer_reads_qualities(plan, tmp_path, api, daemon)
             await _operator_commands(plan, tmp_path, api, daemon)
+            await _server_restarts_alone(plan, tmp_path, api, daemon)
 
             # The line goes down: the values keep their last reading, Uncertain.
             assert (await sim.stop())[0] == 0
@@ -211,3 +216,28 @@ async def _operator_commands(
     assert [c["value"] for c in subscribed["changes"] if c["node"] == running][-1] is True
     state = by_name(await get_json(api, "/api/v1/drives"))["pump-1"]
     assert state["running"] is True
+
+
+async def _server_restarts_alone(
+    plan: Any, tmp_path: Path, api: httpx.AsyncClient, daemon: Child
+) -> None:
+    def serving() -> int:
+        return sum(e["event"] == "opcua.serving" for e in daemon.log_events())
+
+    before = serving()
+    (pid,) = [e["pid"] for e in daemon.log_events() if e["event"] == "opcua.server_started"]
+    os.kill(pid, signal.SIGKILL)
+
+    async def again() -> bool | None:
+        return serving() > before or None
+
+    await until(again, "another OPC UA server", alive=daemon)
+    running = node("pump-1", "Running")
+    found = await run_plan(plan("scada", {"op": "read", "nodes": [running]}), tmp_path / "c")
+    shown = found["steps"][0]["values"][running]
+    assert (shown["value"], shown["status"]) == (True, "Good")
+    line = by_name(await get_json(api, "/api/v1/buses"))["line1"]
+    assert line["up"] is True
+    assert line["stats"]["reopens"] == 0
+    state = by_name(await get_json(api, "/api/v1/drives"))["pump-1"]
+    assert (state["online"], state["running"]) == (True, True)
