@@ -32,6 +32,7 @@ import contextlib
 import socket
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Final
 
@@ -61,6 +62,15 @@ COUNTERS: Final = {
     "requests": "Requests", "replies": "Replies", "timeouts": "Timeouts",
     "retries": "Retries", "checksum_errors": "ChecksumErrors", "reopens": "Reopens",
 }  # fmt: skip
+
+
+@dataclass(slots=True, frozen=True)
+class CallResult:
+    """What a method call ends with: the outcome, and whether the caller may not command."""
+
+    outcome: str
+    reason: str
+    denied: bool = False  # answered BadUserAccessDenied rather than with an Outcome
 
 
 def drive_entry(state: DriveState) -> dict[str, Any]:
@@ -175,7 +185,7 @@ class OpcuaAdapter:
         reader, writer = await asyncio.open_unix_connection(sock=ours)
         log.info("opcua.server_started", pid=process.pid, starts=self.starts)
         try:
-            writer.write(encode(self._hello()))
+            writer.write(encode(self.hello()))
             writer.write(encode({"t": "lines", "lines": self._lines_now()}))
             states = self.gateway.fleet.snapshot()
             writer.write(encode({"t": "drives", "drives": [drive_entry(s) for s in states]}))
@@ -201,7 +211,8 @@ class OpcuaAdapter:
                 raise
         return process.returncode
 
-    def _hello(self) -> dict[str, Any]:
+    def hello(self) -> dict[str, Any]:
+        """The first message to a new server: its settings, users, drives and lines."""
         host, port = modbus_listen(self.settings.listen)
         drives = [{"name": d.name, "bus": line.name} for line in self.lines for d in line.drives]
         lines = [{"name": line.name, "counters": list(COUNTERS.values())} for line in self.lines]
@@ -261,17 +272,21 @@ class OpcuaAdapter:
         user = message.get("user")
         drive = str(message.get("drive"))
         command = message.get("command")
+        result = await self.execute_call(user, drive, command)
+        if not writer.is_closing():
+            answer = {"t": "result", "id": message.get("id"), "denied": result.denied}
+            answer |= {"outcome": result.outcome, "reason": result.reason}
+            writer.write(encode(answer))
+
+    async def execute_call(self, user: str | None, drive: str, command: Any) -> CallResult:
+        """A method call by ``user`` (None: anonymous) as a command, and how it ended."""
         actor = f"opcua:{user or 'anonymous'}"
         result, denied = await self._execute(actor, user, drive, command)
-        if not writer.is_closing():
-            answer = {"t": "result", "id": message.get("id"), "denied": denied}
-            answer |= {"outcome": result.outcome.value, "reason": result.reason}
-            writer.write(encode(answer))
+        return CallResult(result.outcome.value, result.reason, denied)
 
     async def _execute(
         self, actor: str, user: str | None, drive: str, command: Any
     ) -> tuple[CommandResult, bool]:
-        """The call's result, and whether it was refused for who made it."""
         reason = ""
         if not self.settings.commands:
             reason = "opcua.commands is false: the methods are not served"
