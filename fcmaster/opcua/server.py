@@ -11,8 +11,9 @@ on the first start, builds the address space, listens, says ``ready``, and then 
 ``call`` with the session's user, and answered once the daemon's ``result`` (the command's
 outcome) arrives. When the pipe closes (the daemon stopped or died) the process ends.
 
-Endpoints are only those of ``opcua.security``; users are ``http.tokens``; anonymous only
-when switched on (:mod:`.access`).
+It runs at a lower priority than the daemon (:data:`NICENESS`), so where the gateway's cores
+are busy the lines go first. Endpoints are only those of ``opcua.security``; users are
+``http.tokens``; anonymous only when switched on (:mod:`.access`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import argparse
 import asyncio
 import itertools
 import logging
+import os
 import socket
 import sys
 from pathlib import Path
@@ -36,6 +38,8 @@ from fcmaster.opcua.space import Space
 from fcmaster.opcua.wire import Decoder, encode
 
 log = structlog.get_logger("fcmaster.opcua")
+
+NICENESS: Final = 10  # added to the daemon's: this process yields the cores to the lines
 
 _POLICIES: Final = {
     "None": ua.SecurityPolicyType.NoSecurity,
@@ -189,6 +193,9 @@ async def main(fd: int) -> int:
 
 def run() -> None:
     """The process's entry point."""
+    # Where the gateway's cores are busy, the lines' process goes first: a late notification
+    # costs a SCADA screen a moment, a late telegram costs a drive its watchdog.
+    os.nice(NICENESS)
     parser = argparse.ArgumentParser(prog="python -m fcmaster.opcua.server")
     parser.add_argument("--fd", type=int, required=True, help="the daemon's socket")
     args = parser.parse_args()

@@ -9,13 +9,15 @@
 //   {op: "write", node, value}                     the write's status
 //   {op: "subscribe", nodes, until: {node, value}, timeout_ms}
 //                                                  notifications until node shows value
+//   {op: "count", nodes, seconds}                  one group of every node: notifications
+//                                                  counted for that long (load benchmarks)
 // A step that fails records its error and the plan goes on; a failed connection ends it.
 "use strict";
 const fs = require("fs");
 const {
   OPCUAClient, MessageSecurityMode, SecurityPolicy, AttributeIds, UserTokenType,
   DataType, TimestampsToReturn, ClientSubscription,
-  ClientMonitoredItem,
+  ClientMonitoredItem, ClientMonitoredItemGroup,
 } = require("node-opcua-client");
 const { OPCUACertificateManager } = require("node-opcua-certificate-manager");
 
@@ -79,6 +81,26 @@ async function step(session, s) {
     clearTimeout(timer);
     await subscription.terminate();
     return { changes: seen, subscribed_ms };
+  }
+  if (s.op === "count") {
+    const subscription = ClientSubscription.create(session, {
+      requestedPublishingInterval: 100, requestedLifetimeCount: 100,
+      requestedMaxKeepAliveCount: 10, maxNotificationsPerPublish: 0, publishingEnabled: true,
+    });
+    await new Promise((resolve) => subscription.on("started", resolve));
+    const started = Date.now();
+    const group = ClientMonitoredItemGroup.create(subscription,
+      s.nodes.map((nodeId) => ({ nodeId, attributeId: AttributeIds.Value })),
+      { samplingInterval: 0, discardOldest: true, queueSize: 1 }, TimestampsToReturn.Both);
+    await new Promise((resolve) => group.on("initialized", resolve));
+    const subscribed_ms = Date.now() - started;
+    let count = 0;
+    group.on("changed", () => { count += 1; });
+    // Said on stderr at once, so a benchmark can start its window when every client is in.
+    process.stderr.write(`subscribed ${subscribed_ms}\n`);
+    await new Promise((resolve) => setTimeout(resolve, s.seconds * 1000));
+    await subscription.terminate();
+    return { subscribed_ms, count, per_s: count / s.seconds };
   }
   throw new Error(`unknown step ${s.op}`);
 }
