@@ -4,8 +4,10 @@ Run: ``python benchmarks/opcua_load.py [--lines 1] [--drives 126] [--window 10] 
 [--output FILE]`` (a few minutes; needs node and ``tests/node/opcua``'s packages: ``npm ci``).
 
 ``fcmaster run`` serves ``--lines`` simulated FC lines (in-process, ``sim://``, 115200 baud)
-of ``--drives`` drives each, every drive found running, with the HTTP API and the OPC UA
-server (``commands: false``). The client is node-opcua (``tests/node/opcua/client.js``), its
+of ``--drives`` drives each, every drive found running slowly and sent towards 50 Hz on a
+10-minute ramp (so every poll reads a new output frequency, current, power: the drives
+change at the full rate the line reads them), with the HTTP API and the OPC UA server
+(``commands: false``). The client is node-opcua (``tests/node/opcua/client.js``), its
 certificate trusted first. Then windows of ``--window`` seconds, alternately quiet and with 3
 clients each holding one subscription (100 ms publishing) to every variable of every drive
 (status, frequency, alarms, each monitored value: all the drives show), ``--cycles`` times.
@@ -34,6 +36,7 @@ import tempfile
 import threading
 import time
 import urllib.request
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Final
 
@@ -44,6 +47,8 @@ ROOT: Final = Path(__file__).resolve().parent.parent
 CLIENT: Final = ROOT / "tests" / "node" / "opcua"
 DEFAULT_OUTPUT: Final = Path(__file__).resolve().parent / "results" / "opcua_load.json"
 TOKEN: Final = "viewer-token-0123456789abcdef"
+OPERATOR: Final = "operator-token-0123456789abcdef"
+RAMP_S: Final = 600  # FC 3-41: 0 to nominal in 10 minutes, so each poll reads a new speed
 SUBSCRIBE_S: Final = 300.0  # three clients creating thousands of monitored items on 2 cores
 STATUS: Final = (
     "Online", "Running", "Fault", "Warning", "AtReference", "Direction", "StatusWord",
@@ -52,7 +57,10 @@ STATUS: Final = (
 
 
 def _config(lines: int, drives: int, http: int, opcua: int, pki: Path) -> str:
-    running = ", ".join(f"{a}: {{running_hz: {20 + a % 30}}}" for a in range(1, drives + 1))
+    running = ", ".join(
+        f"{a}: {{running_hz: {5 + a % 10}, parameters: {{'3-41': {RAMP_S}}}}}"
+        for a in range(1, drives + 1)
+    )
     text = "buses:\n"
     for line in range(1, lines + 1):
         text += (
@@ -60,11 +68,13 @@ def _config(lines: int, drives: int, http: int, opcua: int, pki: Path) -> str:
             f"    simulation: {{drives: {{{running}}}}}\n    drives:\n"
         )
         text += "".join(
-            f"      - {{name: l{line}d{a}, address: {a}}}\n" for a in range(1, drives + 1)
+            f"      - {{name: l{line}d{a}, address: {a}, control: bus}}\n"
+            for a in range(1, drives + 1)
         )
     return text + (
         f"http:\n  listen: 127.0.0.1:{http}\n  anonymous: viewer\n  tokens:\n"
         f"    - {{name: scada, role: viewer, token: {TOKEN}}}\n"
+        f"    - {{name: ops, role: operator, token: {OPERATOR}}}\n"
         f"opcua:\n  listen: 127.0.0.1:{opcua}\n  pki: {pki}\n"
         "logging: {level: info, format: json}\n"
     )
@@ -112,6 +122,26 @@ def _trust_client(folder: Path, url: str, pki: Path) -> None:
         threading.Event().wait(1)
     (rejected,) = pki_module.certificates(pki)["rejected"]
     pki_module.trust(pki, rejected["thumbprint"])
+
+
+def _ramp_all(base: str) -> None:
+    """Send every drive towards 50 Hz: on its long ramp, each poll reads a new speed."""
+
+    def ramp(name: str) -> str:
+        request = urllib.request.Request(
+            f"{base}/api/v1/drives/{name}/commands",
+            data=json.dumps({"action": "set_reference", "frequency_hz": 50}).encode(),
+            headers={"Authorization": f"Bearer {OPERATOR}", "Content-Type": "application/json"},
+        )
+        with urllib.request.urlopen(request, timeout=120) as response:
+            outcome: str = json.load(response)["outcome"]
+            return outcome
+
+    names = [drive["name"] for drive in _get(f"{base}/api/v1/drives")]
+    with ThreadPoolExecutor(max_workers=32) as pool:
+        outcomes = list(pool.map(ramp, names))
+    if set(outcomes) != {"done"}:
+        raise SystemExit(f"not every drive took its reference: {outcomes}")
 
 
 def _lines(base: str) -> dict[str, dict[str, Any]]:
@@ -235,6 +265,7 @@ def main() -> None:
             _wait_for_fleet(base, daemon, pause)
             _trust_client(folder, url, folder / "pki")
             pids = (daemon.pid, _server_pid(log))
+            _ramp_all(base)
             pause.wait(5)  # the values of every drive read once (they name the variables)
             windows = []
             for cycle in range(args.cycles):
