@@ -4,7 +4,8 @@ Node ids are strings in the fcmaster namespace that follow the browse path
 (``ns=2;s=Drives/pump-1/OutputFrequency``), so a SCADA tag list can be written by hand. The
 values come from the daemon's compact drive states (:mod:`.wire`); their quality and source
 time from :mod:`.quality`. Every variable is read-only (the access rules refuse writes).
-A value the drive reports is added under ``Values/`` the first time it is read.
+A value the drive reports is added under ``Values/`` the first time it is read. A variable is
+written when its value or quality changes, with the time of the reading that showed it.
 """
 
 from __future__ import annotations
@@ -161,7 +162,10 @@ class Space:
         up = self._lines_up.get(self._line_of.get(name, ""), False)
         previous = {} if old is None else {r.path: r for r in readings(old, line_up=up)}
         for reading in readings(entry, line_up=up):
-            if previous.get(reading.path) != reading:
+            before = previous.get(reading.path)
+            # A value the drive reports again unchanged keeps the time it was first read with
+            # that value and quality: writing it again would only cost every subscriber.
+            if before is None or (before.value, before.quality) != (reading.value, reading.quality):
                 await self._show(name, reading)
 
     async def update_line(self, line: Mapping[str, Any]) -> None:
