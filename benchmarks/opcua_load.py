@@ -3,19 +3,21 @@
 Run: ``python benchmarks/opcua_load.py [--lines 1] [--drives 126] [--window 10] [--cycles 2]
 [--output FILE]`` (a few minutes; needs node and ``tests/node/opcua``'s packages: ``npm ci``).
 
-``fcmaster run`` serves ``--lines`` simulated FC lines (in-process, ``sim://``, 115200 baud)
-of ``--drives`` drives each, every drive found running slowly and sent towards 50 Hz on a
-10-minute ramp (so every poll reads a new output frequency, current, power: the drives
-change at the full rate the line reads them), with the HTTP API and the OPC UA server
-(``commands: false``). The client is node-opcua (``tests/node/opcua/client.js``), its
-certificate trusted first. Then windows of ``--window`` seconds, alternately quiet and with 3
-clients each holding one subscription (100 ms publishing) to every variable of every drive
-(status, frequency, alarms, each monitored value: all the drives show), ``--cycles`` times.
-A loaded window starts once all 3 clients are subscribed. SCADA clients run on other
-machines: here they share the gateway's cores, so they run at the lowest priority (``nice
-19``) to take only what the gateway leaves. Per window:
+``fcmaster sim`` serves ``--lines`` simulated FC lines on pseudo-terminals (115200 baud) of
+``--drives`` drives each, and ``fcmaster run`` polls them through the real serial path, with
+the HTTP API and the OPC UA server (``commands: false``). Every drive is found running
+slowly and sent towards 50 Hz on a 10-minute ramp, so every poll reads a new output
+frequency, current, power: the drives change at the full rate the line reads them. The
+client is node-opcua (``tests/node/opcua/client.js``), its certificate trusted first. Then
+windows of ``--window`` seconds, alternately quiet and with 3 clients each holding one
+subscription (100 ms publishing) to every variable of every drive (status, frequency,
+alarms, each monitored value: all the drives show), ``--cycles`` times. A loaded window
+starts once all 3 clients are subscribed. SCADA clients run on other machines: here they
+share the gateway's cores, so they run at the lowest priority (``nice 19``) to take only
+what the gateway leaves. Per window:
 
-- each line's transactions per second (``/api/v1/buses``);
+- each line's transactions per second (``/api/v1/buses``), and the mean gap between good
+  replies of its drive that answered least often;
 - its timers' wake-up lateness (``fcmaster_bus_wakeup_lateness_seconds``, the same histogram):
   the p99 as the bucket bound it falls under, and the mean (null: no timer of the line
   waited in that window, its pauses spent before the next request was ready);
@@ -57,7 +59,7 @@ STATUS: Final = (
 )  # fmt: skip
 
 
-def _config(lines: int, drives: int, http: int, opcua: int, pki: Path) -> str:
+def _config(lines: int, drives: int, http: int, opcua: int, folder: Path) -> str:
     running = ", ".join(
         f"{a}: {{running_hz: {5 + a % 10}, parameters: {{'3-41': {RAMP_S}}}}}"
         for a in range(1, drives + 1)
@@ -65,7 +67,7 @@ def _config(lines: int, drives: int, http: int, opcua: int, pki: Path) -> str:
     text = "buses:\n"
     for line in range(1, lines + 1):
         text += (
-            f"  - name: line{line}\n    port: sim://line{line}\n    baudrate: 115200\n"
+            f"  - name: line{line}\n    port: {folder / f'ttyL{line}'}\n    baudrate: 115200\n"
             f"    simulation: {{drives: {{{running}}}}}\n    drives:\n"
         )
         text += "".join(
@@ -76,7 +78,7 @@ def _config(lines: int, drives: int, http: int, opcua: int, pki: Path) -> str:
         f"http:\n  listen: 127.0.0.1:{http}\n  anonymous: viewer\n  tokens:\n"
         f"    - {{name: scada, role: viewer, token: {TOKEN}}}\n"
         f"    - {{name: ops, role: operator, token: {OPERATOR}}}\n"
-        f"opcua:\n  listen: 127.0.0.1:{opcua}\n  pki: {pki}\n"
+        f"opcua:\n  listen: 127.0.0.1:{opcua}\n  pki: {folder / 'pki'}\n"
         "logging: {level: info, format: json}\n"
     )
 
@@ -152,6 +154,7 @@ def _lines(base: str) -> dict[str, dict[str, Any]]:
         lateness = stats["wakeup_lateness_s"]
         out[bus["name"]] = {
             "requests": stats["requests"],
+            "drives": {name: d["replies"] for name, d in stats["drives"].items()},
             "buckets": [(b["le"], b["count"]) for b in lateness["buckets"]],
             "count": lateness["count"],
             "sum": lateness["sum"],
@@ -182,8 +185,11 @@ def _window(
     for name, end in after.items():
         start = before[name]
         count = end["count"] - start["count"]
+        polls = [end["drives"][d] - start["drives"].get(d, 0) for d in end["drives"]]
         lines[name] = {
             "rate_per_s": (end["requests"] - start["requests"]) / took,
+            # the drive answered least often: its mean gap between good replies
+            "slowest_drive_gap_s": took / min(polls) if polls and min(polls) else None,
             "lateness_p99_s": _p99(start["buckets"], end["buckets"]),
             "lateness_mean_s": (end["sum"] - start["sum"]) / count if count else None,
         }
@@ -254,8 +260,15 @@ def main() -> None:
         folder = Path(temp)
         http, opcua = _free_port(), _free_port()
         config = folder / "plant.yaml"
-        config.write_text(_config(args.lines, args.drives, http, opcua, folder / "pki"))
+        config.write_text(_config(args.lines, args.drives, http, opcua, folder))
         log = folder / "run.log"
+        sim = subprocess.Popen(
+            [sys.executable, "-m", "fcmaster", "sim", "--config", str(config)],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT,
+        )  # fmt: skip
+        assert sim.stdout is not None
+        for _ in range(args.lines):  # `BUS PATH` per line once its pty is linked
+            sim.stdout.readline()
         with log.open("wb") as stderr:
             daemon = subprocess.Popen(
                 [sys.executable, "-m", "fcmaster", "run", "--config", str(config)],
@@ -278,6 +291,8 @@ def main() -> None:
         finally:
             daemon.terminate()
             daemon.wait(timeout=30)
+            sim.terminate()
+            sim.wait(timeout=30)
     quiet_w = [w for w in windows if w["clients"] == 0]
     loaded_w = [w for w in windows if w["clients"] != 0]
 
@@ -295,6 +310,8 @@ def main() -> None:
     summary = {
         "rate_quiet_per_s": per_line(quiet_w, "rate_per_s"),
         "rate_loaded_per_s": per_line(loaded_w, "rate_per_s"),
+        "slowest_drive_gap_quiet_s": worst(quiet_w, "slowest_drive_gap_s"),
+        "slowest_drive_gap_loaded_s": worst(loaded_w, "slowest_drive_gap_s"),
         "lateness_p99_quiet_s": worst(quiet_w, "lateness_p99_s"),
         "lateness_p99_loaded_s": worst(loaded_w, "lateness_p99_s"),
         "lateness_mean_quiet_s": per_line(quiet_w, "lateness_mean_s"),
