@@ -45,7 +45,7 @@ from fcmaster.bus.audit import audit, payload_values
 from fcmaster.bus.commands import CommandResult, Outcome
 from fcmaster.bus.plan import LinePlan
 from fcmaster.drive_state import DriveState
-from fcmaster.errors import UsageError
+from fcmaster.errors import ConfigError, UsageError
 from fcmaster.hub import EventsDropped
 from fcmaster.opcua.wire import Decoder, WireError, encode
 from fcmaster.state import DriveUpdated, LineChanged
@@ -132,8 +132,19 @@ class OpcuaAdapter:
     async def __aenter__(self) -> OpcuaAdapter:
         if self._task is not None:
             raise RuntimeError("the OPC UA adapter is already running")
+        self._check_listen()
         self._task = asyncio.create_task(self._supervise(), name="opcua.supervisor")
         return self
+
+    def _check_listen(self) -> None:
+        """A taken port is the user's to fix: said now, naming the key, not retried forever."""
+        host, port = modbus_listen(self.settings.listen)
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        try:
+            socket.create_server((host, port or 0), family=family).close()
+        except OSError as exc:
+            reason = f"cannot listen on {self.settings.listen}: {exc.strerror or exc}"
+            raise ConfigError([("opcua.listen", reason)]) from exc
 
     async def __aexit__(
         self,

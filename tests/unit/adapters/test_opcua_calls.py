@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 from typing import Any
 
 import pytest
@@ -12,6 +13,7 @@ from fcmaster.adapters.settings import OpcuaSettings, Token
 from fcmaster.bus.commands import Action
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.drive_state import DriveState, Measured
+from fcmaster.errors import ConfigError
 from tests.integration.gateway_double import LINE, FakeGateway
 
 USERS = (Token("scada", "viewer", "v" * 16), Token("ops", "operator", "o" * 16))
@@ -100,3 +102,15 @@ def test_every_drive_of_the_lines_is_in_the_hello() -> None:
     ]  # fmt: skip
     assert hello["settings"]["users"] == [["scada", "v" * 16], ["ops", "o" * 16]]
     assert hello["settings"]["security"] == list(OpcuaSettings().security)
+
+
+async def test_a_taken_port_is_refused_at_start_naming_the_key() -> None:
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = taken.getsockname()[1]
+        settings = OpcuaSettings(listen=f"127.0.0.1:{port}", users=USERS)
+        with pytest.raises(ConfigError) as info:
+            async with OpcuaAdapter(settings, FakeGateway(), lines=(LINE,)):
+                pass
+    ((key, reason),) = info.value.problems
+    assert key == "opcua.listen"
+    assert f"cannot listen on 127.0.0.1:{port}" in reason
