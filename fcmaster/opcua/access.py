@@ -24,6 +24,7 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import Any
 
+import structlog
 from asyncua import ua
 from asyncua.crypto.permission_rules import SimpleRoleRuleset, User, UserRole
 from asyncua.server.internal_server import InternalServer
@@ -38,6 +39,7 @@ from fcmaster.opcua import pki as pki_module
 __all__ = ["CALLER", "Gate", "Rules", "Users", "track_callers"]
 
 CALLER: ContextVar[User | None] = ContextVar("fcmaster_opcua_caller", default=None)
+log = structlog.get_logger("fcmaster.opcua")
 
 _READING = (
     "CreateSessionRequest", "CloseSessionRequest", "ActivateSessionRequest", "ReadRequest",
@@ -51,8 +53,17 @@ _READING = (
 )  # fmt: skip
 
 
+def _id(name: str) -> ua.NodeId:
+    return ua.NodeId(getattr(ua.ObjectIds, f"{name}_Encoding_DefaultBinary"))
+
+
 def _ids(names: tuple[str, ...]) -> set[ua.NodeId]:
-    return {ua.NodeId(getattr(ua.ObjectIds, f"{n}_Encoding_DefaultBinary")) for n in names}
+    return {_id(n) for n in names}
+
+
+# the request kinds a refusal names (what else is refused is named by its type id)
+_NAMES = {_id(n): n for n in ("WriteRequest", "CallRequest", "HistoryUpdateRequest",
+                               "AddNodesRequest", "DeleteNodesRequest", "ReadRequest")}  # fmt: skip
 
 
 _OPENING = (
@@ -77,8 +88,13 @@ class Rules(SimpleRoleRuleset):  # the type asyncua's set_security_policy asks f
         }
 
     def check_validity(self, user: User, action_type_id: ua.NodeId, body: Any) -> bool:
-        """Whether ``user`` may make a request of this type."""
-        return action_type_id in self._allowed.get(user.role, set())
+        """Whether ``user`` may make a request of this type (a refusal is logged with who)."""
+        if action_type_id in self._allowed.get(user.role, set()):
+            return True
+        kind = _NAMES.get(action_type_id, str(action_type_id))
+        log.warning("opcua.request_refused", actor=f"opcua:{user.name or 'anonymous'}",
+                    request=kind)  # fmt: skip
+        return False
 
 
 class Users(UserManager):

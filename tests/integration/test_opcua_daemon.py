@@ -122,7 +122,12 @@ async def test_scada_connects_trusts_reads_qualities_and_commands(tmp_path: Path
             assert values[node("pump-1", "Online")]["value"] is False
             code, _ = await daemon.stop()
             assert code == 0, daemon.tail()
-        audits = [e for e in daemon.log_events() if e["event"] == "command.completed"]
+        events = daemon.log_events()
+        refused = {
+            (e["actor"], e["request"]) for e in events if e["event"] == "opcua.request_refused"
+        }
+        assert ("opcua:scada", "WriteRequest") in refused  # the server process logs who tried
+        audits = [e for e in events if e["event"] == "command.completed"]
         assert {(a["actor"], a["command"], a["outcome"]) for a in audits} >= {
             ("opcua:scada", "start", "not_allowed"),
             ("opcua:ops", "start", "done"),

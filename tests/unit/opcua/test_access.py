@@ -9,6 +9,7 @@ import pytest
 from asyncua import ua
 from asyncua.crypto.permission_rules import User, UserRole
 from cryptography import x509
+from structlog.testing import capture_logs
 
 from fcmaster.errors import UsageError
 from fcmaster.opcua import pki
@@ -53,7 +54,11 @@ def test_nobody_writes_users_call_anonymous_only_reads(anonymous: bool) -> None:
     assert not rules.check_validity(nobody, request("Call"), None)
     for kind in ("Write", "AddNodes", "DeleteNodes", "HistoryUpdate"):
         for user in (named, nobody, User(role=UserRole.Admin)):
-            assert not rules.check_validity(user, request(kind), None)
+            with capture_logs() as logs:
+                assert not rules.check_validity(user, request(kind), None)
+            actor = f"opcua:{user.name or 'anonymous'}"
+            assert logs == [{"event": "opcua.request_refused", "actor": actor,
+                             "request": f"{kind}Request", "log_level": "warning"}]  # fmt: skip
     assert rules.check_validity(nobody, request("ActivateSession"), None)  # to become a user
 
 
