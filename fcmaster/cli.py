@@ -102,6 +102,14 @@ def _cmd_modbus_map(args: argparse.Namespace) -> int:
     return modbus_map.run(args.config, as_json=args.json)
 
 
+def _cmd_opcua(args: argparse.Namespace) -> int:
+    from fcmaster.subcommands import opcua
+
+    if args.opcua_command == "trust":
+        return opcua.trust(args.config, args.thumbprint)
+    return opcua.certs(args.config, as_json=args.json)
+
+
 def _cmd_scan(args: argparse.Namespace) -> int:
     from fcmaster.subcommands import commission
 
@@ -234,6 +242,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "check": _cmd_check,
     "events": _cmd_events,
     "modbus-map": _cmd_modbus_map,
+    "opcua": _cmd_opcua,
     "scan": _cmd_scan,
     "status": _cmd_status,
     "read": _cmd_read,
@@ -255,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
     # Only the subcommand named gets its protocols' options (see build_parser).
     command = next((arg for arg in argv if not arg.startswith("-")), "")
     args = build_parser(command).parse_args(argv)
-    if args.command not in ("run", "decode", "check", "events", "modbus-map", "ports"):
+    if args.command not in ("run", "decode", "check", "events", "modbus-map", "opcua", "ports"):
         from fcmaster import logsetup
 
         # commissioning tools: only what needs attention, in words even into a pipe or file;

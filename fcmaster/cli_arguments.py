@@ -194,6 +194,15 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     modbus_map.add_argument("--config", type=Path, required=True)
     modbus_map.add_argument("--json", action="store_true", help="print JSON")
 
+    opcua = commands.add_parser("opcua", help="the OPC UA server's certificates")
+    opcua_commands = opcua.add_subparsers(dest="opcua_command", required=True)
+    certs = opcua_commands.add_parser("certs", help="own, trusted and rejected certificates")
+    certs.add_argument("--config", type=Path, required=True)
+    certs.add_argument("--json", action="store_true", help="print JSON")
+    trust = opcua_commands.add_parser("trust", help="trust a rejected client certificate")
+    trust.add_argument("--config", type=Path, required=True)
+    trust.add_argument("thumbprint", help="its SHA-1 thumbprint, as `opcua certs` shows it")
+
     scan = commands.add_parser("scan", help="find which addresses answer")
     _line_options(scan, full("scan"))
     scan.add_argument(

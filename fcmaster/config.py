@@ -40,11 +40,18 @@ from pydantic import (
 )
 
 from fcmaster.adapters.auth import listen_problem
-from fcmaster.adapters.settings import HttpSettings, ModbusSettings, MqttSettings
+from fcmaster.adapters.settings import (
+    HttpSettings,
+    ModbusSettings,
+    MqttSettings,
+    OpcuaSettings,
+    Token,
+)
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
 from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.config_hints import in_words
 from fcmaster.config_modbus import check_modbus, modbus_units
+from fcmaster.config_opcua import check_opcua
 from fcmaster.config_profiles import drive_profile, profile_monitor
 from fcmaster.config_sections import (
     HttpModel,
@@ -53,6 +60,7 @@ from fcmaster.config_sections import (
     MetricsModel,
     ModbusModel,
     MqttModel,
+    OpcuaModel,
     TlsModel,
     TokenModel,
 )
@@ -77,6 +85,7 @@ __all__ = [
     "MetricsModel",
     "ModbusModel",
     "MqttModel",
+    "OpcuaModel",
     "TlsModel",
     "TokenModel",
     "load",
@@ -179,6 +188,7 @@ class ConfigModel(_Model):
     http: HttpModel | None = None
     mqtt: MqttModel | None = None
     modbus: ModbusModel | None = None
+    opcua: OpcuaModel | None = None
     metrics: MetricsModel | None = None
     journal: JournalModel | None = None
     logging: LoggingModel = LoggingModel()
@@ -216,6 +226,16 @@ class Config:
         return (
             None if self.model.modbus is None else self.model.modbus.settings(self.modbus_units())
         )
+
+    @property
+    def opcua(self) -> OpcuaSettings | None:
+        """The OPC UA server's settings: its pki folder resolved, its users from http.tokens."""
+        model = self.model.opcua
+        if model is None:
+            return None
+        http = self.model.http
+        users = tuple(Token(t.name, t.role, t.token) for t in (http.tokens if http else ()))
+        return model.settings(str(_beside(self.path, model.pki)), users)
 
     @property
     def journal(self) -> StoreSettings | None:
@@ -429,6 +449,8 @@ def _check(
             check_name(drive.name, f"buses[{b}].drives[{d}].name", problems)
     if model.modbus is not None:
         check_modbus(model.modbus, model.buses, problems)
+    if model.opcua is not None:
+        check_opcua(model.opcua, model.http, _beside(source, model.opcua.pki), problems)
     for b, bus in enumerate(model.buses):
         if bus.port.startswith("sim://"):  # what `run` builds the simulated line from
             from fcmaster.clock import MonotonicClock
@@ -466,6 +488,11 @@ def _check(
                 problems.append((path, f"the same token is already used at {secrets[token.token]}"))
             secrets.setdefault(token.token, path)
     return tuple(lines)
+
+
+def _beside(source: Path | None, path: str) -> Path:
+    """``path`` as written in the config: a relative one is taken from the file's folder."""
+    return Path(path) if source is None else Path(source).parent / path
 
 
 _PLAN_FIELDS = frozenset(field.name for field in dataclasses.fields(LinePlan))

@@ -1,4 +1,4 @@
-"""The config's adapter sections (HTTP, MQTT, Modbus TCP, metrics, logging) as pydantic models.
+"""The config's adapter sections (HTTP, MQTT, Modbus TCP, OPC UA, metrics, logging).
 
 Each model checks what it can alone (``extra="forbid"``, types, ranges, a URL's form); rules
 that need the whole file (tokens that MQTT commands need, Modbus unit ids across buses) are
@@ -9,15 +9,18 @@ from __future__ import annotations
 
 import ipaddress
 from collections.abc import Mapping
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 from urllib.parse import urlsplit
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from fcmaster.adapters.settings import (
+    OPCUA_DEFAULT_SECURITY,
+    OPCUA_SECURITY,
     HttpSettings,
     ModbusSettings,
     MqttSettings,
+    OpcuaSettings,
     TlsSettings,
     Token,
     modbus_listen,
@@ -156,6 +159,51 @@ class ModbusModel(StrictModel):
         allow = None if self.allow is None else tuple(self.allow)
         return ModbusSettings(
             listen=self.listen, allow=allow, commands=self.commands, units=dict(units)
+        )
+
+
+if TYPE_CHECKING:
+    SecurityName = str
+else:  # the known names, checked as a Literal so a wrong one lists the right ones
+    SecurityName = Literal[OPCUA_SECURITY]
+
+
+class OpcuaModel(StrictModel):
+    """The OPC UA server for SCADA (read-only unless ``commands: true``)."""
+
+    listen: str = "127.0.0.1:4840"
+    pki: str = Field(default="/var/lib/fcmaster/pki", min_length=1)
+    security: list[SecurityName] = Field(
+        default_factory=lambda: list(OPCUA_DEFAULT_SECURITY), min_length=1
+    )
+    anonymous: bool = False
+    commands: bool = False
+
+    @field_validator("listen")
+    @classmethod
+    def _check_listen(cls, listen: str) -> str:
+        host, port = modbus_listen(listen)
+        if not host or port is None or not 0 <= port <= 65535:
+            raise ValueError("write it like 127.0.0.1:4840 or [::1]:4840")
+        return listen
+
+    @field_validator("security")
+    @classmethod
+    def _check_security(cls, security: list[str]) -> list[str]:
+        twice = sorted({s for s in security if security.count(s) > 1})
+        if twice:
+            raise ValueError(f"{', '.join(twice)} listed more than once")
+        return security
+
+    def settings(self, pki: str, users: tuple[Token, ...]) -> OpcuaSettings:
+        """What the OPC UA adapter is told (``pki`` resolved, ``users`` from http.tokens)."""
+        return OpcuaSettings(
+            listen=self.listen,
+            pki=pki,
+            security=tuple(self.security),
+            anonymous=self.anonymous,
+            commands=self.commands,
+            users=users,
         )
 
 

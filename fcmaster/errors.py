@@ -27,6 +27,8 @@ its facts as attributes, not only in the message::
     ├── AuthError              a request without the token or role it needs, 401/403
     │                                                                    (adapters.auth)
     ├── ReadsBusy              too many viewer reads wait on a line, 429  (adapters.readlimit)
+    ├── WireError              the OPC UA server process's pipe carried no message
+    │                                                                    (opcua.wire)
     └── Refused                a simulated drive's refusal, answered on the wire as its
                                vendor's error code (sim.danfoss_fc, sim.enc,
                                sim.modbus_rtu; private in sim.mitsubishi and in the

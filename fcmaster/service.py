@@ -82,6 +82,7 @@ ADAPTERS = {
     "http": "fcmaster.adapters.http:HttpAdapter",
     "mqtt": "fcmaster.adapters.mqtt:MqttAdapter",
     "modbus": "fcmaster.adapters.modbus:ModbusAdapter",
+    "opcua": "fcmaster.adapters.opcua:OpcuaAdapter",
 }
 
 
@@ -394,8 +395,10 @@ class Service:
         if target == ADAPTERS["http"]:  # /metrics is served on the HTTP listener
             metrics = self.config.model.metrics
             options["metrics_enabled"] = metrics is not None and metrics.enabled
-        if target == ADAPTERS["modbus"]:  # unit ids and monitored values come from the lines
+        if target in (ADAPTERS["modbus"], ADAPTERS["opcua"]):  # their drives are the lines'
             options["lines"] = self.config.lines
+        if target == ADAPTERS["opcua"]:  # the server process logs as the daemon does
+            options["log_level"] = self.config.model.logging.level
         if target == ADAPTERS["mqtt"]:  # MQTT commands carry the tokens of http.tokens
             http = self.config.http
             options["tokens"] = tuple(

@@ -80,6 +80,36 @@ class ModbusSettings:
     commands: bool = False
 
 
+# The security policies and modes an OPC UA endpoint may offer, as the config writes them:
+# the policy's name from its URI (…/SecurityPolicy#Basic256Sha256) and the message mode.
+OPCUA_SECURITY = (
+    "Basic256Sha256:SignAndEncrypt",
+    "Basic256Sha256:Sign",
+    "Aes256_Sha256_RsaPss:SignAndEncrypt",
+    "Aes256_Sha256_RsaPss:Sign",
+    "Aes128_Sha256_RsaOaep:SignAndEncrypt",
+    "Aes128_Sha256_RsaOaep:Sign",
+    "None",
+)
+OPCUA_DEFAULT_SECURITY = ("Basic256Sha256:SignAndEncrypt", "Aes256_Sha256_RsaPss:SignAndEncrypt")
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
+class OpcuaSettings:
+    """The OPC UA server (``opcua:``); ``pki`` is resolved against the config's folder.
+
+    ``users`` are the tokens of ``http.tokens``: a user name is a token's name, its password
+    the token.
+    """
+
+    listen: str = "127.0.0.1:4840"
+    pki: str = "/var/lib/fcmaster/pki"
+    security: tuple[str, ...] = OPCUA_DEFAULT_SECURITY
+    anonymous: bool = False
+    commands: bool = False
+    users: tuple[Token, ...] = ()
+
+
 def modbus_listen(text: str) -> tuple[str, int | None]:
     """``"127.0.0.1:5020"`` or ``"[::1]:5020"`` → host and port (None if not a number)."""
     text = text.strip()

@@ -67,7 +67,9 @@ def check(path: Path, *, machine: Machine | None = None) -> int:
 
     model = config.model
     adapters = [
-        name for name in ("http", "mqtt", "modbus", "metrics") if getattr(model, name) is not None
+        name
+        for name in ("http", "mqtt", "modbus", "opcua", "metrics")
+        if getattr(model, name) is not None
     ]
     print(f"  adapters: {', '.join(adapters) or 'none'}; on_shutdown: {model.on_shutdown}")
     for plan in config.lines:

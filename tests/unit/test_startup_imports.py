@@ -121,3 +121,13 @@ def test_a_parser_built_for_one_command_parses_it_as_the_whole_parser_does(
     argv: list[str],
 ) -> None:
     assert build_parser(argv[0]).parse_args(argv) == build_parser().parse_args(argv)
+
+
+def test_the_daemon_without_an_opcua_section_never_loads_asyncua() -> None:
+    # The OPC UA server lives in a process of its own; the daemon's side needs only the pipe.
+    statement = (
+        "import fcmaster.service, fcmaster.adapters.opcua, fcmaster.config\n"
+        "fcmaster.config.parse('buses: [{name: l, port: sim://l}]\\n'\n"
+        "                      'opcua: {pki: /tmp}\\n')"
+    )
+    assert loaded_after(statement, ("asyncua", "cryptography")) == []

@@ -1,0 +1,178 @@
+"""Who may connect to the OPC UA server and what they may do (asyncua, locked down).
+
+asyncua as it comes accepts every client certificate, lets any user name in, lets users
+write, and does not tell a method who called it. Here:
+
+- :class:`Gate` checks each client certificate against ``pki/trusted/`` and files an unknown
+  one in ``pki/rejected/`` (BadCertificateUntrusted) for an operator to trust;
+- :class:`Users` knows the ``http.tokens`` (user name = token name, password = token),
+  compared in constant time, and anonymous sessions only when they are switched on;
+- :class:`Rules` lets sessions browse, read and subscribe; calls only for named users (the
+  daemon then decides by the user's role); writes for nobody, so every variable is read-only
+  whatever its access level says;
+- :func:`track_callers` makes every session put its user in :data:`CALLER` while it runs a
+  call request, so a method learns who called it. The method runs inside that request's own
+  await chain (asyncua awaits a coroutine method directly), so the variable holds exactly
+  that session's user; a method that finds none refuses.
+"""
+
+from __future__ import annotations
+
+import datetime
+import hmac
+from contextvars import ContextVar
+from pathlib import Path
+from typing import Any
+
+import structlog
+from asyncua import ua
+from asyncua.crypto.permission_rules import SimpleRoleRuleset, User, UserRole
+from asyncua.server.internal_server import InternalServer
+from asyncua.server.internal_session import InternalSession
+from asyncua.server.user_managers import UserManager
+from asyncua.ua.uaerrors import BadCertificateTimeInvalid, BadCertificateUntrusted
+from cryptography import x509
+from cryptography.hazmat.primitives.serialization import Encoding
+
+from fcmaster.opcua import pki as pki_module
+
+__all__ = ["CALLER", "Gate", "Rules", "Users", "track_callers"]
+
+CALLER: ContextVar[User | None] = ContextVar("fcmaster_opcua_caller", default=None)
+log = structlog.get_logger("fcmaster.opcua")
+
+_READING = (
+    "CreateSessionRequest", "CloseSessionRequest", "ActivateSessionRequest", "ReadRequest",
+    "BrowseRequest", "BrowseNextRequest", "GetEndpointsRequest", "FindServersRequest",
+    "TranslateBrowsePathsToNodeIdsRequest", "CreateSubscriptionRequest",
+    "ModifySubscriptionRequest", "DeleteSubscriptionsRequest", "TransferSubscriptionsRequest",
+    "CreateMonitoredItemsRequest", "ModifyMonitoredItemsRequest",
+    "DeleteMonitoredItemsRequest", "PublishRequest", "RepublishRequest",
+    "CloseSecureChannelRequest", "SetMonitoringModeRequest", "SetPublishingModeRequest",
+    "RegisterNodesRequest", "UnregisterNodesRequest",
+)  # fmt: skip
+
+
+def _id(name: str) -> ua.NodeId:
+    return ua.NodeId(getattr(ua.ObjectIds, f"{name}_Encoding_DefaultBinary"))
+
+
+def _ids(names: tuple[str, ...]) -> set[ua.NodeId]:
+    return {_id(n) for n in names}
+
+
+# the request kinds a refusal names (what else is refused is named by its type id)
+_NAMES = {_id(n): n for n in ("WriteRequest", "CallRequest", "HistoryUpdateRequest",
+                               "AddNodesRequest", "DeleteNodesRequest", "ReadRequest")}  # fmt: skip
+
+
+_OPENING = (
+    "CreateSessionRequest", "ActivateSessionRequest", "CloseSessionRequest",
+    "GetEndpointsRequest", "FindServersRequest", "CloseSecureChannelRequest",
+)  # fmt: skip
+
+
+class Rules(SimpleRoleRuleset):  # the type asyncua's set_security_policy asks for
+    """Read and subscribe for every session, call for named users, write for nobody.
+
+    A session is anonymous until it is activated: unless anonymous sessions are switched on,
+    one may then only activate itself (or close), never read.
+    """
+
+    def __init__(self, *, anonymous: bool) -> None:
+        # SimpleRoleRuleset's own table is not used: check_validity reads this one
+        reading = _ids(_READING)
+        self._allowed = {
+            UserRole.Anonymous: reading if anonymous else _ids(_OPENING),
+            UserRole.User: reading | _ids(("CallRequest",)),
+        }
+
+    def check_validity(self, user: User, action_type_id: ua.NodeId, body: Any) -> bool:
+        """Whether ``user`` may make a request of this type (a refusal is logged with who)."""
+        if action_type_id in self._allowed.get(user.role, set()):
+            return True
+        kind = _NAMES.get(action_type_id, str(action_type_id))
+        log.warning("opcua.request_refused", actor=f"opcua:{user.name or 'anonymous'}",
+                    request=kind)  # fmt: skip
+        return False
+
+
+class Users(UserManager):
+    """The users of ``http.tokens`` (and anonymous readers when switched on)."""
+
+    def __init__(self, tokens: dict[str, str], *, anonymous: bool) -> None:
+        self._tokens = {name: secret.encode() for name, secret in tokens.items()}
+        self._anonymous = anonymous
+
+    def get_user(
+        self,
+        iserver: InternalServer,
+        username: str | None = None,
+        password: str | bytes | None = None,
+        certificate: Any = None,
+    ) -> User | None:
+        """The session's user, or None to refuse it (BadUserAccessDenied).
+
+        ``certificate`` is the client application's (the secure channel's), not a user's:
+        only user names and anonymous sessions are offered (X.509 user tokens are not).
+        """
+        if username is None and password is None:
+            return User(role=UserRole.Anonymous) if self._anonymous else None
+        if username is None or password is None:
+            return None
+        given = password.encode() if isinstance(password, str) else bytes(password)
+        secret = self._tokens.get(username)
+        # Compared even for an unknown name, so the time taken does not tell names apart.
+        if hmac.compare_digest(given, secret or b"\0" * len(given)) and secret is not None:
+            return User(role=UserRole.User, name=username)
+        return None
+
+
+class Gate:
+    """The client certificate check: trusted while its file is in ``pki/trusted/``."""
+
+    def __init__(self, pki: Path, rejected: Any = None) -> None:
+        self.pki = pki
+        self._rejected = rejected  # told each refused certificate's thumbprint
+
+    async def __call__(self, certificate: x509.Certificate, app: ua.ApplicationDescription) -> None:
+        """Refuse an untrusted or expired certificate (asyncua's CertificateValidatorMethod)."""
+        der = certificate.public_bytes(Encoding.DER)
+        if not pki_module.trusted(self.pki, der):
+            pki_module.reject(self.pki, der)
+            if self._rejected is not None:
+                self._rejected(pki_module.thumbprint(der), app.ApplicationUri)
+            raise BadCertificateUntrusted
+        now = datetime.datetime.now(datetime.UTC)
+        if not certificate.not_valid_before_utc <= now <= certificate.not_valid_after_utc:
+            raise BadCertificateTimeInvalid
+
+
+class _CallerSession(InternalSession):
+    async def call(self, params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
+        token = CALLER.set(self.user)
+        try:
+            results: list[ua.CallMethodResult] = await super().call(params)
+            return results
+        finally:
+            CALLER.reset(token)
+
+
+def track_callers(iserver: InternalServer) -> None:
+    """Make every session ``iserver`` creates name its user in :data:`CALLER` during calls."""
+
+    def create_session(
+        name: str, user: User | None = None, external: bool = False
+    ) -> InternalSession:
+        user = user or User(role=UserRole.Anonymous)
+        return _CallerSession(
+            iserver,
+            iserver.aspace,
+            iserver.subscription_service,
+            name,
+            user=user,
+            external=external,
+        )
+
+    # asyncua has no hook for the sessions it makes: its factory method is replaced
+    iserver.create_session = create_session  # type: ignore[method-assign]
