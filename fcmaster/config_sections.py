@@ -137,6 +137,14 @@ def _cidr(text: str) -> str:
     return text
 
 
+def _listen_address(listen: str, port_example: int) -> str:
+    """``listen`` if it is a host and a port (the example names the server's usual port)."""
+    host, port = modbus_listen(listen)
+    if not host or port is None or not 0 <= port <= 65535:
+        raise ValueError(f"write it like 127.0.0.1:{port_example} or [::1]:{port_example}")
+    return listen
+
+
 class ModbusModel(StrictModel):
     """The Modbus TCP server for PLCs and SCADA (read-only unless ``commands: true``)."""
 
@@ -149,10 +157,7 @@ class ModbusModel(StrictModel):
     @field_validator("listen")
     @classmethod
     def _check_listen(cls, listen: str) -> str:
-        host, port = modbus_listen(listen)
-        if not host or port is None or not 0 <= port <= 65535:
-            raise ValueError("write it like 127.0.0.1:5020 or [::1]:5020")
-        return listen
+        return _listen_address(listen, 5020)
 
     def settings(self, units: Mapping[str, int]) -> ModbusSettings:
         """What the Modbus adapter is told, with each drive's unit id (see ``modbus_units``)."""
@@ -182,10 +187,7 @@ class OpcuaModel(StrictModel):
     @field_validator("listen")
     @classmethod
     def _check_listen(cls, listen: str) -> str:
-        host, port = modbus_listen(listen)
-        if not host or port is None or not 0 <= port <= 65535:
-            raise ValueError("write it like 127.0.0.1:4840 or [::1]:4840")
-        return listen
+        return _listen_address(listen, 4840)
 
     @field_validator("security")
     @classmethod
