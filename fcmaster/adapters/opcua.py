@@ -42,12 +42,14 @@ from fcmaster.adapters.command_json import parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.settings import OpcuaSettings, modbus_listen
 from fcmaster.bus.audit import audit, payload_values
+from fcmaster.bus.codecs import codec_for, monitor_keys
 from fcmaster.bus.commands import CommandResult, Outcome
-from fcmaster.bus.plan import LinePlan
+from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.drive_state import DriveState
-from fcmaster.errors import ConfigError, UsageError
+from fcmaster.errors import ConfigError, FcmasterError, UsageError
 from fcmaster.hub import EventsDropped
 from fcmaster.opcua.wire import Decoder, WireError, encode
+from fcmaster.protocol.registry import spec_for
 from fcmaster.state import DriveUpdated, LineChanged
 
 log = structlog.get_logger("fcmaster.adapters.opcua")
@@ -95,6 +97,21 @@ def drive_entry(state: DriveState) -> dict[str, Any]:
             (m.name or parameter): [m.value, m.updated_at] for parameter, m in state.values.items()
         },
     }
+
+
+def value_names(line: LinePlan, drive: DrivePlan) -> list[str]:
+    """The names ``drive``'s monitored values go by in its state, before any was read.
+
+    Each is the manual's name as a reading carries it, or the parameter where the tables
+    name none (see :func:`drive_entry`), so the server shows every ``Values/`` variable from
+    the start, waiting for its first reading, instead of one appearing when first read.
+    """
+    try:
+        keys = monitor_keys(codec_for(line), drive)
+        title_of = spec_for(line.protocol).parameters_of(line, drive.profile).title_of
+    except FcmasterError:  # a plan the config would refuse: values appear as they come
+        return []
+    return list(dict.fromkeys(title_of(key) or key.name for key in keys))
 
 
 def line_entry(name: str, up: bool, stats: dict[str, Any] | None) -> dict[str, Any]:
@@ -225,7 +242,11 @@ class OpcuaAdapter:
     def hello(self) -> dict[str, Any]:
         """The first message to a new server: its settings, users, drives and lines."""
         host, port = modbus_listen(self.settings.listen)
-        drives = [{"name": d.name, "bus": line.name} for line in self.lines for d in line.drives]
+        drives = [
+            {"name": d.name, "bus": line.name, "values": value_names(line, d)}
+            for line in self.lines
+            for d in line.drives
+        ]
         lines = [{"name": line.name, "counters": list(COUNTERS.values())} for line in self.lines]
         settings = {
             "host": host, "port": port, "pki": self.settings.pki,

@@ -194,8 +194,26 @@ async def _viewer_reads_qualities(
     state = by_name(await get_json(api, "/api/v1/drives"))["pump-3"]
     assert silent["source"] == state["updated_at"]  # the reading's time, to the millisecond
     assert call["status"] == "BadUserAccessDenied"
+    await _never_heard_values_wait(plan, tmp_path)
     # Nobody writes: the request itself is refused (a service fault, as node-opcua reports it)
     assert "BadUserAccessDenied" in write.get("status", write.get("error", "")), write
+
+
+async def _never_heard_values_wait(plan: Any, tmp_path: Path) -> None:
+    """A drive never heard shows its monitored values from the start, each waiting."""
+    listed = await run_plan(
+        plan("scada", *({"op": "browse", "node": node(d, "Values")} for d in ("pump-1", "pump-2"))),
+        tmp_path / "c",
+    )
+    heard, never = (step["names"] for step in listed["steps"])
+    assert "Motor Current" in never  # the manual's name, as the drive state gives it
+    assert sorted(never) == sorted(heard)
+    values = [node("pump-2", f"Values/{name}") for name in never]
+    read = await run_plan(plan("scada", {"op": "read", "nodes": values}), tmp_path / "c")
+    shown = read["steps"][0]["values"]
+    assert {(v["status"], v["value"]) for v in shown.values()} == {
+        ("BadWaitingForInitialData", None)
+    }
 
 
 async def _operator_commands(
