@@ -45,7 +45,7 @@ from fcmaster.bus.audit import audit, payload_values
 from fcmaster.bus.codecs import codec_for, monitor_keys
 from fcmaster.bus.commands import CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan, LinePlan
-from fcmaster.drive_state import DriveState
+from fcmaster.drive_state import DriveState, rfc3339
 from fcmaster.errors import ConfigError, FcmasterError, UsageError
 from fcmaster.hub import EventsDropped
 from fcmaster.opcua.wire import Decoder, WireError, encode
@@ -114,6 +114,14 @@ def value_names(line: LinePlan, drive: DrivePlan) -> list[str]:
     return list(dict.fromkeys(title_of(key) or key.name for key in keys))
 
 
+def _session(given: Any) -> dict[str, Any]:
+    """A session as the child listed it, with its ``since`` in RFC 3339."""
+    since = given.get("since") if isinstance(given, dict) else None
+    fields = ("user", "client", "application", "security")
+    shown = {key: given.get(key) if isinstance(given, dict) else None for key in fields}
+    return shown | {"since": rfc3339(since) if isinstance(since, int | float) else None}
+
+
 def line_entry(name: str, up: bool, stats: dict[str, Any] | None) -> dict[str, Any]:
     """A line's compact form: up or not, and its counters."""
     given = stats or {}
@@ -145,6 +153,7 @@ class OpcuaAdapter:
         self.process: asyncio.subprocess.Process | None = None
         self.starts = 0
         self.ready = asyncio.Event()  # set while a child serves
+        self.sessions: list[dict[str, Any]] = []  # the child's, as it last said
 
     async def __aenter__(self) -> OpcuaAdapter:
         if self._task is not None:
@@ -225,6 +234,7 @@ class OpcuaAdapter:
             log.warning("opcua.pipe_broken", reason=repr(failed.exceptions[0]))
         finally:
             self.ready.clear()
+            self.sessions = []  # they ended with their server
             writer.close()
             try:
                 async with asyncio.timeout(STOP_S):
@@ -238,6 +248,15 @@ class OpcuaAdapter:
                     await process.wait()
                 raise
         return process.returncode
+
+    def status(self) -> dict[str, Any]:
+        """The server as ``GET /api/v1/status`` shows it: where, whether up, its sessions."""
+        return {
+            "listen": self.settings.listen,
+            "up": self.ready.is_set(),
+            "restarts": max(0, self.starts - 1),
+            "sessions": list(self.sessions),
+        }
 
     def hello(self) -> dict[str, Any]:
         """The first message to a new server: its settings, users, drives and lines."""
@@ -293,6 +312,9 @@ class OpcuaAdapter:
                 if message["t"] == "ready":
                     self.ready.set()
                     log.info("opcua.serving", listen=self.settings.listen)
+                elif message["t"] == "sessions":
+                    self.sessions = [_session(s) for s in message.get("sessions", ())]
+                    log.info("opcua.sessions", users=[s["user"] for s in self.sessions])
                 elif message["t"] == "call":
                     task = asyncio.create_task(self._call(message, writer), name="opcua.call")
                     self._calls.add(task)
