@@ -67,3 +67,15 @@ async def test_values_never_read_wait_for_their_first_reading(space: Space) -> N
     typed = await _read(space, "Values/Type")  # one not in the list comes as it is read
     assert typed == ("FC-302", ua.StatusCodes.Good)
     assert await _names(space) == [*NAMES, "Type"]
+
+
+async def test_a_listed_value_that_reads_as_text_says_so_in_its_data_type(space: Space) -> None:
+    await space.update_line({"name": "line1", "up": True})
+    entry = {"name": "pump-1", "online": True, "at": 1000.0,
+             "values": {"Frequency": ["n/a", 1000.0]}}  # fmt: skip
+    await space.update_drive(entry)
+    assert await _read(space, "Values/Frequency") == ("n/a", ua.StatusCodes.Good)
+    node = space.server.get_node(ua.NodeId("Drives/pump-1/Values/Frequency", space.ns))
+    assert await node.read_data_type() == ua.NodeId(ua.ObjectIds.String)
+    made_so = space.server.get_node(ua.NodeId("Drives/pump-1/Values/Motor Current", space.ns))
+    assert await made_so.read_data_type() == ua.NodeId(ua.ObjectIds.Double)
