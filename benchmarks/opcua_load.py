@@ -1,9 +1,12 @@
 """What OPC UA clients cost the lines: 0 vs 3 clients subscribed to every variable.
 
-Run: ``python benchmarks/opcua_load.py [--lines 1] [--drives 126] [--window 10] [--cycles 2]
-[--output FILE]`` (a few minutes; needs node and ``tests/node/opcua``'s packages: ``npm ci``).
+Run: ``python benchmarks/opcua_load.py [--lines 1] [--drives 126] [--baudrate 115200]
+[--window 10] [--cycles 2] [--output FILE]`` (a few minutes; needs node and
+``tests/node/opcua``'s packages: ``npm ci``).
 
-``fcmaster sim`` serves ``--lines`` simulated FC lines on pseudo-terminals (115200 baud) of
+``fcmaster sim`` serves ``--lines`` simulated FC lines on pseudo-terminals (115200 baud unless
+``--baudrate``: at 115200 the pause has often gone by before the next request is ready, so few
+timers wait and few lateness samples come; at 19200 its 2 ms are waited out by a timer) of
 ``--drives`` drives each, and ``fcmaster run`` polls them through the real serial path, with
 the HTTP API and the OPC UA server (``commands: false``). Every drive is found running
 slowly and sent towards 50 Hz on a 10-minute ramp, so every poll reads a new output
@@ -19,8 +22,11 @@ what the gateway leaves. Per window:
 - each line's transactions per second (``/api/v1/buses``), and the mean gap between good
   replies of its drive that answered least often;
 - its timers' wake-up lateness (``fcmaster_bus_wakeup_lateness_seconds``, the same histogram):
-  the p99 as the bucket bound it falls under, and the mean (null: no timer of the line
-  waited in that window, its pauses spent before the next request was ready);
+  the p99 as the bucket bound it falls under, the p99 of the window's raw samples
+  (the window's ``lateness_p99_raw_s``, one per line: the daemon runs under
+  ``lateness_tap.py``, which keeps them), and
+  the mean (null: no timer of the line waited in that window, its pauses spent before the
+  next request was ready);
 - the OPC UA server process's CPU (share of one core) and RSS, and the daemon's CPU;
 - for loaded windows, each client's notifications per second and the time it took to
   subscribe to every variable.
@@ -43,6 +49,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Final
 
+import lateness_tap
 import results_file
 from daemon_footprint import _cpu_s, _free_port, _rss_kib, _wait_for_fleet
 
@@ -59,7 +66,7 @@ STATUS: Final = (
 )  # fmt: skip
 
 
-def _config(lines: int, drives: int, http: int, opcua: int, folder: Path) -> str:
+def _config(lines: int, drives: int, http: int, opcua: int, folder: Path, baud: int) -> str:
     running = ", ".join(
         f"{a}: {{running_hz: {5 + a % 10}, parameters: {{'3-41': {RAMP_S}}}}}"
         for a in range(1, drives + 1)
@@ -67,7 +74,7 @@ def _config(lines: int, drives: int, http: int, opcua: int, folder: Path) -> str
     text = "buses:\n"
     for line in range(1, lines + 1):
         text += (
-            f"  - name: line{line}\n    port: {folder / f'ttyL{line}'}\n    baudrate: 115200\n"
+            f"  - name: line{line}\n    port: {folder / f'ttyL{line}'}\n    baudrate: {baud}\n"
             f"    simulation: {{drives: {{{running}}}}}\n    drives:\n"
         )
         text += "".join(
@@ -195,6 +202,7 @@ def _window(
         }
     return {
         "seconds": took,
+        "span": (t0, t0 + took),
         "lines": lines,
         "daemon_cpu": (cpu1 - cpu0) / took,
         "server_cpu": (server_cpu1 - server_cpu0) / took,
@@ -251,6 +259,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lines", type=int, default=1)
     parser.add_argument("--drives", type=int, default=126)
+    parser.add_argument("--baudrate", type=int, default=115200)
     parser.add_argument("--window", type=float, default=10.0)
     parser.add_argument("--cycles", type=int, default=2)
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT)
@@ -260,8 +269,8 @@ def main() -> None:
         folder = Path(temp)
         http, opcua = _free_port(), _free_port()
         config = folder / "plant.yaml"
-        config.write_text(_config(args.lines, args.drives, http, opcua, folder))
-        log = folder / "run.log"
+        config.write_text(_config(args.lines, args.drives, http, opcua, folder, args.baudrate))
+        log, samples = folder / "run.log", folder / "lateness.json"
         sim = subprocess.Popen(
             [sys.executable, "-m", "fcmaster", "sim", "--config", str(config)],
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT,
@@ -271,7 +280,8 @@ def main() -> None:
             sim.stdout.readline()
         with log.open("wb") as stderr:
             daemon = subprocess.Popen(
-                [sys.executable, "-m", "fcmaster", "run", "--config", str(config)],
+                [sys.executable, str(Path(__file__).parent / "lateness_tap.py"), str(samples),
+                 "run", "--config", str(config)],
                 stdout=subprocess.DEVNULL, stderr=stderr, cwd=ROOT,
             )  # fmt: skip
         base, url = f"http://127.0.0.1:{http}", f"opc.tcp://127.0.0.1:{opcua}/"
@@ -293,6 +303,11 @@ def main() -> None:
             daemon.wait(timeout=30)
             sim.terminate()
             sim.wait(timeout=30)
+        raw = lateness_tap.load(samples)
+    for window in windows:  # each line's p99 of the window's own samples (lines unnamed)
+        start, end = window.pop("span")
+        window["lateness_p99_raw_s"] = [lateness_tap.p99(s, start, end) for s in raw.values()]
+        window["lateness_samples"] = [sum(start <= t < end for t, _ in s) for s in raw.values()]
     quiet_w = [w for w in windows if w["clients"] == 0]
     loaded_w = [w for w in windows if w["clients"] != 0]
 
@@ -302,6 +317,10 @@ def main() -> None:
 
     def worst(ws: list[dict[str, Any]], key: str) -> float | None:
         given = [line[key] for w in ws for line in w["lines"].values() if line[key] is not None]
+        return max(given, default=None)
+
+    def worst_raw(ws: list[dict[str, Any]]) -> float | None:
+        given = [p for w in ws for p in w["lateness_p99_raw_s"] if p is not None]
         return max(given, default=None)
 
     def per_line(ws: list[dict[str, Any]], key: str) -> float | None:
@@ -314,6 +333,8 @@ def main() -> None:
         "slowest_drive_gap_loaded_s": worst(loaded_w, "slowest_drive_gap_s"),
         "lateness_p99_quiet_s": worst(quiet_w, "lateness_p99_s"),
         "lateness_p99_loaded_s": worst(loaded_w, "lateness_p99_s"),
+        "lateness_p99_raw_quiet_s": worst_raw(quiet_w),
+        "lateness_p99_raw_loaded_s": worst_raw(loaded_w),
         "lateness_mean_quiet_s": per_line(quiet_w, "lateness_mean_s"),
         "lateness_mean_loaded_s": per_line(loaded_w, "lateness_mean_s"),
         "server_cpu_quiet": mean([w["server_cpu"] for w in quiet_w]),
@@ -328,6 +349,7 @@ def main() -> None:
         **results_file.provenance("opcua_load"),
         "lines": args.lines,
         "drives_per_line": args.drives,
+        "baudrate": args.baudrate,
         "window_s": args.window,
         "summary": summary,
         "windows": windows,

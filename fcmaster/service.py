@@ -134,6 +134,7 @@ class Service:
         # what runs, so that a reload can close and open each alone
         self._line_stacks: dict[str, AsyncExitStack] = {}
         self._adapter_stacks: dict[str, AsyncExitStack] = {}
+        self._adapters: dict[str, Any] = {}  # each running adapter, by its config section
         self.reloader = Reloader(self, load or _load_again)
         self._stopping = asyncio.Event()
         self._running_commands = 0
@@ -259,6 +260,12 @@ class Service:
         """The running config: its hash, when it was loaded, and how the last reload went."""
         return self.reloader.status()
 
+    def opcua_status(self) -> dict[str, Any] | None:
+        """The OPC UA server's state and sessions (None: no ``opcua:`` section)."""
+        adapter = self._adapters.get("opcua")
+        status: dict[str, Any] | None = None if adapter is None else adapter.status()
+        return status
+
     async def run(self, *, install_signals: bool = True) -> None:
         """Run until :meth:`stop` or SIGTERM/SIGINT; then shut down in order."""
         loop = asyncio.get_running_loop()
@@ -376,12 +383,14 @@ class Service:
         settings = getattr(self.config, section)
         if settings is not None:
             stack = AsyncExitStack()
-            await stack.enter_async_context(self._adapter(ADAPTERS[section], settings))
+            adapter = await stack.enter_async_context(self._adapter(ADAPTERS[section], settings))
             self._adapter_stacks[section] = stack
+            self._adapters[section] = adapter
 
     async def stop_adapter(self, section: str) -> None:
         """Stop the adapter of config section ``section``, if it runs."""
         stack = self._adapter_stacks.pop(section, None)
+        self._adapters.pop(section, None)
         if stack is not None:
             await stack.aclose()
 

@@ -37,7 +37,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.codecs import codec_for, monitor_keys
 from fcmaster.bus.commands import Command, CommandResult
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.watchdog import WatchdogReport
@@ -111,11 +111,7 @@ def _monitored(line: LinePlan, drive: DrivePlan) -> frozenset[str] | None:
     """The parameter names ``drive``'s values show (None: any, when the codec cannot say)."""
     try:
         codec = codec_for(line)
-        keys = (
-            codec.default_monitor()
-            if drive.monitor is None
-            else tuple(codec.parameter(p) for p in drive.monitor)
-        )
+        keys = monitor_keys(codec, drive)
         words = codec.condition_parameters(alarms=True, warnings=True)
     except FcmasterError:  # a plan the config would refuse; show what comes
         return None

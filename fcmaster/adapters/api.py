@@ -248,8 +248,14 @@ def create_app(
 
     @app.get("/api/v1/status", responses=_AUTH_ERRORS)
     async def status(_: Viewer) -> Response:
-        """The daemon: its version and its config (hash, loaded_at, last_reload)."""
-        return json_response({"version": __version__, "config": gateway.config_status()})
+        """The daemon: its version, its config (hash, loaded_at, last_reload), its OPC UA server.
+
+        ``opcua`` is null without an ``opcua:`` section, else its ``listen``, whether its
+        server process is ``up``, its ``restarts``, and its ``sessions`` (``user``, null for
+        anonymous; ``client``, ``application``, ``security``, ``since``).
+        """
+        body = {"version": __version__, "config": gateway.config_status()}
+        return json_response(body | {"opcua": gateway.opcua_status()})
 
     @app.get(
         "/api/v1/events",

@@ -70,6 +70,9 @@ class Gateway(Protocol):
     def config_status(self) -> dict[str, Any]:
         """The running config: ``hash``, ``loaded_at``, ``last_reload``, ``reloads``."""
 
+    def opcua_status(self) -> dict[str, Any] | None:
+        """The OPC UA server: ``listen``, ``up``, ``restarts``, ``sessions``; None: no opcua:."""
+
     async def events(
         self,
         *,

@@ -27,7 +27,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final
 
-from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.codecs import codec_for, monitor_keys
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.protocol.drive import pct_to_hz
 from fcmaster.protocol.registry import spec_for
@@ -230,12 +230,7 @@ def _holdings(drive: DrivePlan) -> tuple[Register, ...]:
 
 
 def _value_registers(line: LinePlan, drive: DrivePlan) -> list[Register]:
-    codec = codec_for(line)
-    keys = (
-        codec.default_monitor()
-        if drive.monitor is None
-        else tuple(codec.parameter(text) for text in drive.monitor)
-    )
+    keys = monitor_keys(codec_for(line), drive)
     # a Modbus RTU drive's units are its profile's
     unit_of = spec_for(line.protocol).parameters_of(line, drive.profile).unit_of
     registers = []

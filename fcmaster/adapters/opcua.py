@@ -42,12 +42,14 @@ from fcmaster.adapters.command_json import parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.settings import OpcuaSettings, modbus_listen
 from fcmaster.bus.audit import audit, payload_values
+from fcmaster.bus.codecs import codec_for, monitor_keys
 from fcmaster.bus.commands import CommandResult, Outcome
-from fcmaster.bus.plan import LinePlan
-from fcmaster.drive_state import DriveState
-from fcmaster.errors import ConfigError, UsageError
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.drive_state import DriveState, rfc3339
+from fcmaster.errors import ConfigError, FcmasterError, UsageError
 from fcmaster.hub import EventsDropped
 from fcmaster.opcua.wire import Decoder, WireError, encode
+from fcmaster.protocol.registry import spec_for
 from fcmaster.state import DriveUpdated, LineChanged
 
 log = structlog.get_logger("fcmaster.adapters.opcua")
@@ -97,6 +99,29 @@ def drive_entry(state: DriveState) -> dict[str, Any]:
     }
 
 
+def value_names(line: LinePlan, drive: DrivePlan) -> list[str]:
+    """The names ``drive``'s monitored values go by in its state, before any was read.
+
+    Each is the manual's name as a reading carries it, or the parameter where the tables
+    name none (see :func:`drive_entry`), so the server shows every ``Values/`` variable from
+    the start, waiting for its first reading, instead of one appearing when first read.
+    """
+    try:
+        keys = monitor_keys(codec_for(line), drive)
+        title_of = spec_for(line.protocol).parameters_of(line, drive.profile).title_of
+    except FcmasterError:  # a plan the config would refuse: values appear as they come
+        return []
+    return list(dict.fromkeys(title_of(key) or key.name for key in keys))
+
+
+def _session(given: Any) -> dict[str, Any]:
+    """A session as the child listed it, with its ``since`` in RFC 3339."""
+    since = given.get("since") if isinstance(given, dict) else None
+    fields = ("user", "client", "application", "security")
+    shown = {key: given.get(key) if isinstance(given, dict) else None for key in fields}
+    return shown | {"since": rfc3339(since) if isinstance(since, int | float) else None}
+
+
 def line_entry(name: str, up: bool, stats: dict[str, Any] | None) -> dict[str, Any]:
     """A line's compact form: up or not, and its counters."""
     given = stats or {}
@@ -128,6 +153,7 @@ class OpcuaAdapter:
         self.process: asyncio.subprocess.Process | None = None
         self.starts = 0
         self.ready = asyncio.Event()  # set while a child serves
+        self.sessions: list[dict[str, Any]] = []  # the child's, as it last said
 
     async def __aenter__(self) -> OpcuaAdapter:
         if self._task is not None:
@@ -208,6 +234,7 @@ class OpcuaAdapter:
             log.warning("opcua.pipe_broken", reason=repr(failed.exceptions[0]))
         finally:
             self.ready.clear()
+            self.sessions = []  # they ended with their server
             writer.close()
             try:
                 async with asyncio.timeout(STOP_S):
@@ -222,10 +249,23 @@ class OpcuaAdapter:
                 raise
         return process.returncode
 
+    def status(self) -> dict[str, Any]:
+        """The server as ``GET /api/v1/status`` shows it: where, whether up, its sessions."""
+        return {
+            "listen": self.settings.listen,
+            "up": self.ready.is_set(),
+            "restarts": max(0, self.starts - 1),
+            "sessions": list(self.sessions),
+        }
+
     def hello(self) -> dict[str, Any]:
         """The first message to a new server: its settings, users, drives and lines."""
         host, port = modbus_listen(self.settings.listen)
-        drives = [{"name": d.name, "bus": line.name} for line in self.lines for d in line.drives]
+        drives = [
+            {"name": d.name, "bus": line.name, "values": value_names(line, d)}
+            for line in self.lines
+            for d in line.drives
+        ]
         lines = [{"name": line.name, "counters": list(COUNTERS.values())} for line in self.lines]
         settings = {
             "host": host, "port": port, "pki": self.settings.pki,
@@ -272,6 +312,9 @@ class OpcuaAdapter:
                 if message["t"] == "ready":
                     self.ready.set()
                     log.info("opcua.serving", listen=self.settings.listen)
+                elif message["t"] == "sessions":
+                    self.sessions = [_session(s) for s in message.get("sessions", ())]
+                    log.info("opcua.sessions", users=[s["user"] for s in self.sessions])
                 elif message["t"] == "call":
                     task = asyncio.create_task(self._call(message, writer), name="opcua.call")
                     self._calls.add(task)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from fcmaster.bus.plan import LinePlan
-from fcmaster.protocol.codec import DriveCodec
+from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.protocol.codec import DriveCodec, ParameterKey
 from fcmaster.protocol.registry import spec_for
 
 
@@ -14,6 +14,16 @@ def codec_for(plan: LinePlan) -> DriveCodec:
     nominal_hz = {drive.address: drive.nominal_frequency_hz for drive in plan.drives}
     profiles = {d.address: d.profile for d in plan.drives if d.profile is not None}
     return spec_for(plan.protocol).codec(plan, nominal_hz, profiles)
+
+
+def monitor_keys(codec: DriveCodec, drive: DrivePlan) -> tuple[ParameterKey, ...]:
+    """What ``drive``'s idle polls read: its monitor list, or the protocol's default one.
+
+    UsageError for a parameter the codec does not know (the config check refuses it first).
+    """
+    if drive.monitor is None:
+        return codec.default_monitor()
+    return tuple(codec.parameter(text) for text in drive.monitor)
 
 
 def with_protocol_delay(plan: LinePlan) -> LinePlan:

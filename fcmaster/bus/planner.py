@@ -67,6 +67,7 @@ from __future__ import annotations
 import dataclasses
 
 from fcmaster.bus import admission, pacing
+from fcmaster.bus.codecs import monitor_keys
 from fcmaster.bus.commands import Action, Command
 from fcmaster.bus.hearing import Hearing
 from fcmaster.bus.intents import (
@@ -135,9 +136,7 @@ class Planner:
         return slot
 
     def _monitor(self, drive: DrivePlan) -> tuple[ParameterKey, ...]:
-        if drive.monitor is None:
-            return self.codec.default_monitor()
-        return tuple(self.codec.parameter(p) for p in drive.monitor)
+        return monitor_keys(self.codec, drive)
 
     def reconfigure(self, plan: LinePlan, reason: str) -> list[Completion]:
         """Serve the drives of ``plan`` from now on; its line settings are this line's.

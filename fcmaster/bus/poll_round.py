@@ -6,7 +6,7 @@ it (:mod:`fcmaster.bus.watchdog`): a drive whose timeout is shorter trips in nor
 
 from __future__ import annotations
 
-from fcmaster.bus.codecs import codec_for
+from fcmaster.bus.codecs import codec_for, monitor_keys
 from fcmaster.bus.plan import LinePlan
 
 __all__ = ["poll_round_s"]
@@ -21,11 +21,7 @@ def poll_round_s(plan: LinePlan) -> tuple[float, float]:
     pause = plan.pause_s if plan.pause_s is not None else codec.min_pause_s(plan.char_s)
     one_round = full_refresh = 0.0
     for drive in plan.drives:
-        monitor = (
-            codec.default_monitor()
-            if drive.monitor is None
-            else tuple(codec.parameter(p) for p in drive.monitor)
-        )
+        monitor = monitor_keys(codec, drive)
         times = []
         for read in codec.poll_sequence(monitor):
             exchange = codec.poll(drive.address, None, read)

@@ -35,6 +35,7 @@ from cryptography import x509
 from cryptography.hazmat.primitives.serialization import Encoding
 
 from fcmaster.opcua import pki as pki_module
+from fcmaster.opcua.sessions import SessionBook
 
 __all__ = ["CALLER", "Gate", "Rules", "Users", "track_callers"]
 
@@ -149,6 +150,31 @@ class Gate:
 
 
 class _CallerSession(InternalSession):
+    book: SessionBook | None = None
+    application = ""  # the client's own name, from its CreateSession
+
+    async def create_session(
+        self, params: ua.CreateSessionParameters, sockname: tuple[str, int] | None = None
+    ) -> ua.CreateSessionResult:
+        description = params.ClientDescription
+        if description is not None and description.ApplicationName is not None:
+            self.application = description.ApplicationName.Text or ""
+        result: ua.CreateSessionResult = await super().create_session(params, sockname)
+        return result
+
+    def activate_session(
+        self, params: ua.ActivateSessionParameters, peer_certificate: bytes | None
+    ) -> ua.ActivateSessionResult:
+        result: ua.ActivateSessionResult = super().activate_session(params, peer_certificate)
+        if self.book is not None:  # reached only once the user was let in
+            self.book.activated(self, self.application)
+        return result
+
+    async def close_session(self, delete_subs: bool = True) -> None:
+        if self.book is not None:
+            self.book.closed(self)
+        await super().close_session(delete_subs)
+
     async def call(self, params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
         token = CALLER.set(self.user)
         try:
@@ -158,14 +184,17 @@ class _CallerSession(InternalSession):
             CALLER.reset(token)
 
 
-def track_callers(iserver: InternalServer) -> None:
-    """Make every session ``iserver`` creates name its user in :data:`CALLER` during calls."""
+def track_callers(iserver: InternalServer, book: SessionBook | None = None) -> None:
+    """Make every session ``iserver`` creates name its user in :data:`CALLER` during calls.
+
+    With ``book``, each session also says when it is activated and when it closes.
+    """
 
     def create_session(
         name: str, user: User | None = None, external: bool = False
     ) -> InternalSession:
         user = user or User(role=UserRole.Anonymous)
-        return _CallerSession(
+        session = _CallerSession(
             iserver,
             iserver.aspace,
             iserver.subscription_service,
@@ -173,6 +202,8 @@ def track_callers(iserver: InternalServer) -> None:
             user=user,
             external=external,
         )
+        session.book = book
+        return session
 
     # asyncua has no hook for the sessions it makes: its factory method is replaced
     iserver.create_session = create_session  # type: ignore[method-assign]

@@ -34,6 +34,7 @@ from asyncua import Server, ua
 from fcmaster import logsetup
 from fcmaster.opcua import pki
 from fcmaster.opcua.access import CALLER, Gate, Rules, Users, track_callers
+from fcmaster.opcua.sessions import SessionBook
 from fcmaster.opcua.space import Space
 from fcmaster.opcua.wire import Decoder, encode
 
@@ -126,7 +127,8 @@ async def serve(child: Child, hello: dict[str, Any]) -> None:
     users = Users(dict(settings["users"]), anonymous=settings["anonymous"])
     server = Server(user_manager=users)
     await server.init()
-    track_callers(server.iserver)
+    book = SessionBook(server, lambda listed: child.send({"t": "sessions", "sessions": listed}))
+    track_callers(server.iserver, book)
     server.set_endpoint(f"opc.tcp://{'[' + host + ']' if ':' in host else host}:{port}/")
     server.set_server_name("fcmaster")
     await server.set_application_uri(pki.APPLICATION_URI)

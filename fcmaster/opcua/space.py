@@ -4,14 +4,16 @@ Node ids are strings in the fcmaster namespace that follow the browse path
 (``ns=2;s=Drives/pump-1/OutputFrequency``), so a SCADA tag list can be written by hand. The
 values come from the daemon's compact drive states (:mod:`.wire`); their quality and source
 time from :mod:`.quality`. Every variable is read-only (the access rules refuse writes).
-A value the drive reports is added under ``Values/`` the first time it is read. A variable is
-written when its value or quality changes, with the time of the reading that showed it.
+A drive's ``Values/`` are made with it from the names its monitor list gives them (the
+hello's ``values``), waiting for their first reading; a value the drive reports under
+another name is added the first time it is read. A variable is written when its value or
+quality changes, with the time of the reading that showed it.
 """
 
 from __future__ import annotations
 
 import datetime
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable, Iterable, Mapping
 from typing import Any, Final
 
 from asyncua import Node, Server, ua
@@ -64,6 +66,7 @@ class Space:
         self._nodes: dict[str, ua.NodeId] = {}  # "Drives/pump-1/Running" → its node id
         self._drives: dict[str, Node] = {}
         self._values: dict[str, Node] = {}  # each drive's Values folder
+        self._texts: set[str] = set()  # the Values variables whose DataType says String
         self._entries: dict[str, Mapping[str, Any]] = {}  # each drive's last compact entry
         self._line_of: dict[str, str] = {}
         self._lines_up: dict[str, bool] = {}
@@ -72,12 +75,12 @@ class Space:
         return ua.NodeId(path, self.ns)
 
     async def build(self, drives: list[dict[str, Any]], lines: list[dict[str, Any]]) -> None:
-        """Make the objects for ``drives`` (name, bus) and ``lines`` (name, counter names)."""
+        """Make the objects for ``drives`` (name, bus, values) and ``lines`` (name, counters)."""
         self.ns = await self.server.register_namespace(NAMESPACE)
         root = await self.server.nodes.objects.add_folder(self._id("fcmaster"), "fcmaster")
         folder = await root.add_folder(self._id("Drives"), "Drives")
         for drive in drives:
-            await self._drive(folder, drive["name"])
+            await self._drive(folder, drive["name"], drive.get("values", ()))
             self._line_of[drive["name"]] = drive["bus"]
         folder = await root.add_folder(self._id("Lines"), "Lines")
         for line in lines:
@@ -88,7 +91,7 @@ class Space:
                 await self._variable(node, f"Lines/{name}/{counter}", counter, V.UInt64)
             self._lines_up[name] = False
 
-    async def _drive(self, folder: Node, name: str) -> None:
+    async def _drive(self, folder: Node, name: str, values: Iterable[str]) -> None:
         node = await folder.add_object(self._id(f"Drives/{name}"), name)
         self._drives[name] = node
         for variable, kind in _TYPES.items():
@@ -101,6 +104,10 @@ class Space:
                 )
                 await prop.write_value_rank(ua.ValueRank.Scalar)
         self._values[name] = await node.add_folder(self._id(f"Drives/{name}/Values"), "Values")
+        for value in values:  # a number until its first reading says it is text
+            await self._variable(
+                self._values[name], f"Drives/{name}/Values/{value}", value, V.Double
+            )
         outputs = [_argument("Outcome"), _argument("Reason")]
         for method, action in METHODS.items():
             inputs = [_argument("FrequencyHz", V.Double)] if method == "SetReference" else []
@@ -198,6 +205,12 @@ class Space:
         value = reading.value
         if reading.path.startswith("Values/") and isinstance(value, str):
             kind = V.String
+            if path not in self._texts:  # made as a number before its first reading
+                self._texts.add(path)
+                await self.server.get_node(self._nodes[path]).write_attribute(
+                    ua.AttributeIds.DataType,
+                    ua.DataValue(ua.Variant(ua.NodeId(kind.value), V.NodeId)),
+                )
         elif kind is V.Double and value is not None:
             value = float(value)
         await self._write(path, kind, value, reading.quality, reading.source_at)

@@ -122,6 +122,9 @@ class ParameterTables:
     changeable_while_running: frozenset[str]  # known from the manuals; all others: stopped
     link_settings: frozenset[str]  # address, baud, parity, protocol: never restored
     unit_of: Callable[[ParameterKey], str]  # the unit its values come in, as read
+    # the manual's name of a parameter ("Motor Current"; "" where the tables do not name it),
+    # as its values carry it once read: surfaces show a value under it before the first read
+    title_of: Callable[[ParameterKey], str]
     # Hz settings that cap the output frequency: a restore keeps them within the drive's
     # configured max_frequency_hz unless forced.
     frequency_ceilings: frozenset[str] = frozenset()
@@ -130,7 +133,12 @@ class ParameterTables:
     ranges: tuple[tuple[str, float, float], ...] = ()
 
     @classmethod
-    def of(cls, tables: ModuleType, unit_of: Callable[[ParameterKey], str]) -> ParameterTables:
+    def of(
+        cls,
+        tables: ModuleType,
+        unit_of: Callable[[ParameterKey], str],
+        title_of: Callable[[ParameterKey], str],
+    ) -> ParameterTables:
         """The tables of a vendor's ``parameters`` module, where every vendor names them alike."""
         return cls(
             set_members=tables.SET_MEMBERS,
@@ -139,6 +147,7 @@ class ParameterTables:
             changeable_while_running=tables.CHANGEABLE_WHILE_RUNNING,
             link_settings=tables.LINK_SETTINGS,
             unit_of=unit_of,
+            title_of=title_of,
             frequency_ceilings=tables.FREQUENCY_CEILINGS,
             ranges=tables.SET_RANGES,
         )

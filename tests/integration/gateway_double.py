@@ -98,6 +98,9 @@ class FakeGateway:
     def config_status(self) -> dict[str, Any]:
         return {"hash": "0" * 16, "loaded_at": None, "last_reload": None, "reloads": {}}
 
+    def opcua_status(self) -> dict[str, Any] | None:
+        return None
+
     async def events(
         self,
         *,

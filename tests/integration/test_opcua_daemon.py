@@ -12,6 +12,7 @@ noticed.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import signal
@@ -101,6 +102,7 @@ async def test_scada_connects_trusts_reads_qualities_and_commands(tmp_path: Path
 
             await _trust_the_client(plan, tmp_path, config, daemon)
             await _viewer_reads_qualities(plan, tmp_path, api, daemon)
+            await _sessions_shown(plan, tmp_path, api, daemon)
             await _operator_commands(plan, tmp_path, api, daemon)
             await _server_restarts_alone(plan, tmp_path, api, daemon)
 
@@ -194,8 +196,60 @@ async def _viewer_reads_qualities(
     state = by_name(await get_json(api, "/api/v1/drives"))["pump-3"]
     assert silent["source"] == state["updated_at"]  # the reading's time, to the millisecond
     assert call["status"] == "BadUserAccessDenied"
+    await _never_heard_values_wait(plan, tmp_path)
     # Nobody writes: the request itself is refused (a service fault, as node-opcua reports it)
     assert "BadUserAccessDenied" in write.get("status", write.get("error", "")), write
+
+
+async def _never_heard_values_wait(plan: Any, tmp_path: Path) -> None:
+    """A drive never heard shows its monitored values from the start, each waiting."""
+    listed = await run_plan(
+        plan("scada", *({"op": "browse", "node": node(d, "Values")} for d in ("pump-1", "pump-2"))),
+        tmp_path / "c",
+    )
+    heard, never = (step["names"] for step in listed["steps"])
+    assert "Motor Current" in never  # the manual's name, as the drive state gives it
+    assert sorted(never) == sorted(heard)
+    values = [node("pump-2", f"Values/{name}") for name in never]
+    read = await run_plan(plan("scada", {"op": "read", "nodes": values}), tmp_path / "c")
+    shown = read["steps"][0]["values"]
+    assert {(v["status"], v["value"]) for v in shown.values()} == {
+        ("BadWaitingForInitialData", None)
+    }
+
+
+async def _sessions_shown(plan: Any, tmp_path: Path, api: httpx.AsyncClient, daemon: Child) -> None:
+    """A session is listed in the daemon's status, with its user, while it lasts."""
+    released = tmp_path / "release"
+    held = asyncio.create_task(
+        run_plan(plan("scada", {"op": "hold", "file": str(released), "timeout_ms": 60000}),
+                 tmp_path / "held")
+    )  # fmt: skip
+
+    async def listed() -> list[dict[str, Any]] | None:
+        sessions: list[dict[str, Any]] = (await get_json(api, "/api/v1/status"))["opcua"][
+            "sessions"
+        ]
+        return sessions or None
+
+    try:
+        (session,) = await until(listed, "the OPC UA session in the status", alive=daemon)
+    finally:
+        released.touch()
+    status = (await get_json(api, "/api/v1/status"))["opcua"]
+    listen = plan(None)["url"].removeprefix("opc.tcp://").rstrip("/")
+    assert (status["listen"], status["up"], status["restarts"]) == (listen, True, 0)
+    assert session["user"] == "scada"
+    assert session["application"] == "fcmaster-test-client"
+    assert session["security"] == "Basic256Sha256:SignAndEncrypt"
+    assert session["client"].startswith("127.0.0.1:")
+    assert session["since"].endswith("Z")
+    assert (await held)["steps"] == [{"held": True}]
+
+    async def gone() -> bool | None:
+        return (await get_json(api, "/api/v1/status"))["opcua"]["sessions"] == [] or None
+
+    await until(gone, "the closed session gone from the status", alive=daemon)
 
 
 async def _operator_commands(
@@ -244,5 +298,7 @@ async def _server_restarts_alone(
     line = by_name(await get_json(api, "/api/v1/buses"))["line1"]
     assert line["up"] is True
     assert line["stats"]["reopens"] == 0
+    status = (await get_json(api, "/api/v1/status"))["opcua"]
+    assert (status["up"], status["restarts"]) == (True, 1)
     state = by_name(await get_json(api, "/api/v1/drives"))["pump-1"]
     assert (state["online"], state["running"]) == (True, True)

@@ -577,6 +577,41 @@ function renderLines() {
   }
 }
 
+// -- the gateway's own servers ------------------------------------------------------------
+
+const STATUS_EVERY_MS = 5000;  // sessions come and go rarely: the status is asked for, not streamed
+const gatewayShown = { shown: {} };  // what the sessions table shows
+
+// The OPC UA server (when the config has one): whether its process serves, and who is
+// connected to it — SCADA clients, with the user each logged in as.
+async function loadStatus() {
+  let status;
+  try {
+    const response = await api("/api/v1/status");
+    if (!response.ok) return;
+    status = await response.json();
+  } catch (error) {
+    return;  // the daemon is away: the connection pill says so
+  }
+  renderOpcua(status.opcua);
+}
+
+function renderOpcua(opcua) {
+  $("gateway-section").hidden = !opcua;
+  if (!opcua) return;
+  put($("opcua-pill"), opcua.up ? "up" : "down");
+  $("opcua-pill").className = `pill ${opcua.up ? "pill-up" : "pill-down"}`;
+  const restarts = opcua.restarts ? `restarted ${opcua.restarts}×` : "";
+  const count = `${opcua.sessions.length} session${opcua.sessions.length === 1 ? "" : "s"}`;
+  put($("opcua-where"), [opcua.listen, count, restarts].filter(Boolean).join(" · "));
+  const body = $("opcua-sessions").tBodies[0];
+  const texts = opcua.sessions.map((s) => [s.user ?? "anonymous", s.client, s.application || "–",
+    s.security, s.since ? new Date(s.since).toLocaleString() : "–"]);
+  replaceIf(gatewayShown, "sessions", JSON.stringify(texts), body,
+            () => texts.map((cells) => el("tr", { "data-testid": "opcua-session" },
+              ...cells.map((text) => el("td", { text })))));
+}
+
 // -- events -------------------------------------------------------------------------------
 
 // A journal record as [stamp, text, class]: drive events as the stream tells them.
@@ -878,3 +913,5 @@ window.addEventListener("resize", () => { clearTimeout(resizeCharts.timer); resi
 setInterval(() => { for (const [name, record] of rows) markStale(record, fleet.drives.get(name)); }, 2000);
 route();
 start();
+loadStatus();
+setInterval(loadStatus, STATUS_EVERY_MS);

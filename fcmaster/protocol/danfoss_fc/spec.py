@@ -53,7 +53,11 @@ SPEC: Final[ProtocolSpec[FcOptions]] = ProtocolSpec(
     parities=("E", "O", "N"),  # 8-33
     # The response delay is each drive's own 8-35: the line's response_delay_ms says it.
     status_bits=StatusWord,
-    parameters=ParameterTables.of(parameters, lambda key: parameters.lookup(key.code).unit),
+    parameters=ParameterTables.of(
+        parameters,
+        lambda key: parameters.lookup(key.code).unit,
+        lambda key: parameters.lookup(key.code).name,
+    ),
     describe=describe_telegram,
     checksum_key="bcc_ok",
     ramp_parameters=("3-41", "3-42"),

@@ -76,7 +76,11 @@ SPEC: Final[ProtocolSpec[EncOptions]] = ProtocolSpec(
     parities=("N", "E", "O"),  # F2.14
     address_hint=_address_hint,
     status_bits=StateWord,
-    parameters=ParameterTables.of(parameters, lambda key: parameters.lookup(key.code).unit),
+    parameters=ParameterTables.of(
+        parameters,
+        lambda key: parameters.lookup(key.code).unit,
+        lambda key: parameters.lookup(key.code).name,
+    ),
     describe=describe_frame,
     checksum_key="checksum_ok",
     parse_text=parse_ascii_frame,

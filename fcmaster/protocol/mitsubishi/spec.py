@@ -88,7 +88,11 @@ SPEC: Final[ProtocolSpec[MitsubishiOptions]] = ProtocolSpec(
     parities=("E", "O", "N"),  # Pr.120
     fixed_response_delay_s=_response_delay_s,
     status_bits=StatusBits,
-    parameters=ParameterTables.of(parameters, lambda key: parameters.resolve(key).unit),
+    parameters=ParameterTables.of(
+        parameters,
+        lambda key: parameters.resolve(key).unit,
+        lambda key: parameters.resolve(key).name,
+    ),
     describe=describe_frame,
     checksum_key="sum_ok",
     parse_text=parse_ascii_frame,

@@ -16,7 +16,7 @@ from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import ParameterKey
 from fcmaster.protocol.modbus_rtu.keys import key_register, register_key
 from fcmaster.protocol.modbus_rtu.profile import DriveProfile
-from fcmaster.protocol.modbus_rtu.replies import scaled
+from fcmaster.protocol.modbus_rtu.replies import scaled, title_of
 from fcmaster.protocol.spec import ParameterTables
 
 _WATCHDOG_NAMES: Final = {
@@ -57,4 +57,5 @@ def tables_of(profile: DriveProfile | None) -> ParameterTables:
         changeable_while_running=frozenset(),
         link_settings=frozenset(),
         unit_of=unit_of,
+        title_of=lambda key: title_of(profile, key),
     )

@@ -7,6 +7,7 @@ profile's. A drive without a profile gives values only, unscaled.
 
 from __future__ import annotations
 
+from fcmaster.errors import UsageError
 from fcmaster.protocol.codec import (
     Condition,
     ConditionReport,
@@ -93,13 +94,26 @@ def hz_of(register: Register, words: tuple[int, ...], nominal_hz: float) -> floa
     return pct_to_hz(value, nominal_hz) if register.unit == "%" else value
 
 
+def _title(profile: DriveProfile | None, register: Register) -> str:
+    """The name the profile gives ``register`` ("" where it lists it nowhere)."""
+    listed = (*profile.values, *profile.parameters) if profile is not None else ()
+    return next((v.name for v in listed if same_register(v.register, register)), "")
+
+
+def title_of(profile: DriveProfile | None, key: ParameterKey) -> str:
+    """The name the profile gives the register ``key`` names ("" for none, or no register)."""
+    try:
+        return _title(profile, scaled(profile, key_register(key)))
+    except UsageError:  # a profile's own key (output frequency, fault)
+        return ""
+
+
 def value_of(
     profile: DriveProfile | None, key: ParameterKey, words: tuple[int, ...]
 ) -> ParameterValue:
     """The value of the register ``key`` names, in the profile's scaling and by its name."""
     register = scaled(profile, key_register(key))
-    listed = (*profile.values, *profile.parameters) if profile is not None else ()
-    title = next((v.name for v in listed if same_register(v.register, register)), "")
+    title = _title(profile, register)
     raw = 0
     for word in words:
         raw = raw << 16 | word

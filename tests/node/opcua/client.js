@@ -11,6 +11,7 @@
 //                                                  notifications until node shows value
 //   {op: "count", nodes, seconds}                  one group of every node: notifications
 //                                                  counted for that long (load benchmarks)
+//   {op: "hold", file, timeout_ms}                 keep the session open until file exists
 // A step that fails records its error and the plan goes on; a failed connection ends it.
 "use strict";
 const fs = require("fs");
@@ -101,6 +102,14 @@ async function step(session, s) {
     await new Promise((resolve) => setTimeout(resolve, s.seconds * 1000));
     await subscription.terminate();
     return { subscribed_ms, count, per_s: count / s.seconds };
+  }
+  if (s.op === "hold") {
+    const until = Date.now() + (s.timeout_ms || 30000);
+    while (!fs.existsSync(s.file)) {
+      if (Date.now() > until) throw new Error(`no ${s.file} in time`);
+      await new Promise((resolve) => setTimeout(resolve, 100));
+    }
+    return { held: true };
   }
   throw new Error(`unknown step ${s.op}`);
 }

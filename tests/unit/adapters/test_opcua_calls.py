@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
 import socket
-from typing import Any
+from typing import Any, cast
 
 import pytest
 from structlog.testing import capture_logs
@@ -14,6 +15,7 @@ from fcmaster.bus.commands import Action
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.drive_state import DriveState, Measured
 from fcmaster.errors import ConfigError
+from fcmaster.opcua.wire import encode
 from tests.integration.gateway_double import LINE, FakeGateway
 
 USERS = (Token("scada", "viewer", "v" * 16), Token("ops", "operator", "o" * 16))
@@ -114,3 +116,35 @@ async def test_a_taken_port_is_refused_at_start_naming_the_key() -> None:
     ((key, reason),) = info.value.problems
     assert key == "opcua.listen"
     assert f"cannot listen on 127.0.0.1:{port}" in reason
+
+
+async def test_the_servers_sessions_are_kept_as_it_says_them() -> None:
+    served = adapter(FakeGateway())
+    assert served.status() == {"listen": "127.0.0.1:4840", "up": False, "restarts": 0,
+                               "sessions": []}  # fmt: skip
+    session = {"user": "scada", "client": "127.0.0.1:50312", "application": "UaExpert",
+               "security": "Basic256Sha256:SignAndEncrypt", "since": 1795000000.25}  # fmt: skip
+    anonymous = session | {"user": None, "client": "10.0.0.9:40000", "since": 1795000001.0}
+    said: list[dict[str, Any]] = [
+        {"t": "ready"},
+        {"t": "sessions", "sessions": [session, anonymous]},
+    ]
+    reader = asyncio.StreamReader()
+    reader.feed_data(b"".join(encode(m) for m in said))
+    reader.feed_eof()
+    feed = asyncio.create_task(asyncio.sleep(60))
+    with capture_logs() as logs:
+        await served._listen(reader, cast(Any, None), feed)
+    shown = served.status()
+    assert shown["up"] is True
+    assert shown["sessions"] == [
+        session | {"since": "2026-11-18T11:06:40.250Z"},
+        anonymous | {"since": "2026-11-18T11:06:41.000Z"},
+    ]
+    assert {"event": "opcua.sessions", "users": ["scada", None]}.items() <= logs[-1].items()
+    assert feed.cancelled() or feed.cancelling()  # the child is gone: its feed stops
+    reader = asyncio.StreamReader()
+    reader.feed_data(encode({"t": "sessions", "sessions": [anonymous]}))
+    reader.feed_eof()
+    await served._listen(reader, cast(Any, None), asyncio.create_task(asyncio.sleep(60)))
+    assert [s["user"] for s in served.status()["sessions"]] == [None]
