@@ -369,12 +369,12 @@ class Planner:
         self._in_flight = None
         slot = step.slot
         pending = step.pending
+        # A command to be retried stays at the head of its queue, and its drive's misses
+        # are not counted until its retries are spent.
         retried = pending is not None and not self._progress.failed(
             pending, report, reason, self.plan.retries
         )
-        if retried:
-            return report  # stays at the head of its queue: retried next
-        if slot is not None:
+        if slot is not None and not retried:
             kind = None if step.kind is StepKind.COMMAND else step.kind
             # After the deadline a late reply may still be arriving: the line is not free.
             tail_s = self.plan.wire_s(step.exchange.reply_length) + self.plan.gap_s

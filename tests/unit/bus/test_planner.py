@@ -456,6 +456,24 @@ def test_start_ignored_by_the_drive_is_unconfirmed_at_its_deadline() -> None:
     )
 
 
+def test_a_start_past_its_deadline_is_unconfirmed_even_when_the_exchange_is_a_retried_one() -> None:
+    # Every exchange's report ends the confirmations whose deadline has passed, that of a
+    # command which failed and will be retried too (its result was one exchange late).
+    p = planner(dataclasses.replace(A, confirm_s=2.0), B, retries=1)
+    adopted(p)
+    p.submit("a", start(50.0), "start")
+    answer(p, 0.0)  # acknowledged: now waiting for the status to show it running
+    p.submit("b", Command(action=Action.READ, parameter="16-13"), "read")
+    step = take(p, 2.5)
+    assert step.pending is not None
+    assert step.pending.command.action is Action.READ
+    report = p.on_failure(step, 2.5, "no reply")
+    assert [(c.tickets, c.result.outcome) for c in report.completions] == [
+        (("start",), Outcome.UNCONFIRMED)
+    ]
+    assert p.on_failure(take(p, 2.6), 2.6, "no reply").completions[0].tickets == ("read",)
+
+
 def test_start_is_unconfirmed_with_the_alarm_text_when_the_drive_trips() -> None:
     p = planner(A)
     adopted(p)
