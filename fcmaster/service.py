@@ -82,6 +82,7 @@ ADAPTERS = {
     "http": "fcmaster.adapters.http:HttpAdapter",
     "mqtt": "fcmaster.adapters.mqtt:MqttAdapter",
     "modbus": "fcmaster.adapters.modbus:ModbusAdapter",
+    "sparkplug": "fcmaster.adapters.sparkplug.adapter:SparkplugAdapter",
 }
 
 
