@@ -1,0 +1,262 @@
+"""The Sparkplug edge node against a real mosquitto and a host application from the spec."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Callable
+from pathlib import Path
+
+import pytest
+
+from fcmaster.adapters.settings import SparkplugSettings
+from fcmaster.adapters.sparkplug.adapter import SparkplugAdapter
+from fcmaster.adapters.sparkplug.payload import DataType, Metric
+from tests.integration.gateway_double import FakeGateway
+from tests.integration.mosquitto import Broker
+from tests.integration.sparkplug_host import Received, SparkplugHost
+
+LIMIT_S = 30.0
+GROUP, NODE = "Plant", "gw-1"
+
+# The metrics DESIGN.md names for every drive, with their datatypes.
+DEVICE_METRICS = {
+    "Output Frequency": DataType.DOUBLE,
+    "Reference": DataType.DOUBLE,
+    "Status/Running": DataType.BOOLEAN,
+    "Status/Fault": DataType.BOOLEAN,
+    "Status/Warning": DataType.BOOLEAN,
+    "Status/At Reference": DataType.BOOLEAN,
+    "Status/Word": DataType.INT64,
+    "Status/Direction": DataType.STRING,
+    "Alarms": DataType.STRING,
+    "Warnings": DataType.STRING,
+    "Watchdog/Verdict": DataType.STRING,
+    "Control/Run": DataType.BOOLEAN,
+    "Control/Reference Hz": DataType.DOUBLE,
+    "Control/Reset": DataType.BOOLEAN,
+    "Control/Last Outcome": DataType.STRING,
+    "Control/Last Reason": DataType.STRING,
+}
+
+
+@pytest.fixture
+async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
+    async with Broker(tmp_path) as running:
+        yield running
+
+
+def settings(broker: Broker, tmp_path: Path, **changes: object) -> SparkplugSettings:
+    fields: dict[str, object] = {
+        "url": broker.url,
+        "group_id": GROUP,
+        "edge_node_id": NODE,
+        "primary_host_id": "scada",
+        "store": str(tmp_path / "spool" / "sparkplug.db"),
+        "reconnect_min_s": 0.05,
+        "reconnect_max_s": 0.2,
+        "rebirth_min_s": 0.0,
+        **changes,
+    }
+    return SparkplugSettings(**fields)  # type: ignore[arg-type]  # a test's few settings
+
+
+def unit(received: Received, name: str) -> object:
+    properties = received.metric(name).properties
+    found = None if properties is None else properties.get("engUnit")
+    return None if found is None else found.value
+
+
+def is_pump(received: Received) -> bool:
+    return received.device == "pump-1"
+
+
+async def test_births_wait_for_the_primary_host_and_pair_with_deaths_by_bdseq(
+    broker: Broker, tmp_path: Path
+) -> None:
+    gateway = FakeGateway()
+    gateway.reply("pump-1", running=True, hz=25.0, value=("16-14", 3.5, "A"))
+    gateway.reply("fan-1")
+    async with (
+        asyncio.timeout(LIMIT_S),
+        SparkplugHost(broker, GROUP, announce=False) as host,
+    ):
+        async with SparkplugAdapter(settings(broker, tmp_path), gateway) as node:
+            await node.connected.wait()
+            await asyncio.sleep(0.3)  # connected and subscribed, but the host has said nothing
+            assert host.received == []
+
+            await host.online()
+            birth = await host.wait("NBIRTH")
+            assert birth.payload.seq == 0
+            assert birth.values() == {"bdSeq": 0, "Node Control/Rebirth": False}
+            assert birth.metric("bdSeq").datatype == DataType.INT64
+            pump = await host.wait("DBIRTH", is_pump)
+            types = {m.name: m.datatype for m in pump.payload.metrics}
+            assert {n: types.get(n) for n in DEVICE_METRICS} == DEVICE_METRICS
+            assert types["Values/Motor Current"] == DataType.DOUBLE
+            assert (
+                pump.metric("Values/Motor Current").value,
+                unit(pump, "Values/Motor Current"),
+            ) == (
+                3.5,
+                "A",
+            )
+            assert (pump.metric("Output Frequency").value, unit(pump, "Output Frequency")) == (
+                25.0,
+                "Hz",
+            )
+            assert unit(pump, "Control/Reference Hz") == "Hz"
+            assert pump.metric("Reference").value == 50.0
+            await host.wait("DBIRTH", lambda r: r.device == "fan-1")
+
+            mark = len(host.received)
+            gateway.reply("pump-1", running=True, hz=40.0, value=("16-14", 3.5, "A"))
+            data = await host.wait("DDATA", is_pump, start=mark)
+            assert data.values()["Output Frequency"] == 40.0
+            assert "Status/Running" not in data.values()  # by exception: only what changed
+
+            await host.offline()
+            death = await host.wait("NDEATH")
+            assert host.deaths == [(0, True)]
+            assert death.payload.seq is None
+            await asyncio.sleep(0.3)
+            assert host.on("NBIRTH") == [birth]  # waits for the host again
+
+            await host.online()
+            again = await host.wait("NBIRTH", start=death.index)
+            assert again.values()["bdSeq"] == 1  # a new connection, the next bdSeq
+            await host.wait("DBIRTH", is_pump, start=again.index)
+            mark = len(host.received)
+        # leaving on purpose: its own NDEATH, with the bdSeq of its birth
+        await host.wait("NDEATH", start=mark)
+    assert host.deaths == [(0, True), (1, True)]
+    assert host.problems == []
+
+
+def frequency_is(hz: float) -> Callable[[Received], bool]:
+    def check(received: Received) -> bool:
+        return is_pump(received) and received.values().get("Output Frequency") == hz
+
+    return check
+
+
+async def test_seq_runs_across_the_session_through_rebirths_and_a_drive_going_away(
+    broker: Broker, tmp_path: Path
+) -> None:
+    gateway = FakeGateway()
+    gateway.reply("pump-1", running=True, hz=1.0)
+    gateway.reply("fan-1")
+    options = settings(broker, tmp_path, rebirth_min_s=3600.0)
+    async with (
+        asyncio.timeout(LIMIT_S),
+        SparkplugHost(broker, GROUP) as host,
+        SparkplugAdapter(options, gateway) as node,
+    ):
+        await host.wait("DBIRTH", lambda r: r.device == "fan-1")
+        for step in range(2, 302):  # past 255: seq wraps to 0 and goes on (the host checks)
+            gateway.reply("pump-1", running=True, hz=step / 10)
+            await asyncio.sleep(0)
+        last = await host.wait("DDATA", frequency_is(30.1))
+        seqs = [r.payload.seq for r in host.received]
+        assert seqs.index(255) < seqs.index(0, 1) < len(seqs) - 1
+
+        await host.rebirth(NODE)
+        rebirth = await host.wait("NBIRTH", start=last.index)
+        assert rebirth.values()["bdSeq"] == 0  # the same session: the same Will, the same bdSeq
+        await host.wait("DBIRTH", lambda r: r.device == "fan-1", start=rebirth.index)
+        await host.rebirth(NODE)  # too soon after the last: ignored
+        gateway.reply("pump-1", running=True, hz=7.0)
+        marker = await host.wait("DDATA", frequency_is(7.0), start=rebirth.index)
+        await host.rebirth(NODE)
+        gateway.reply("pump-1", running=True, hz=8.0)
+        await host.wait("DDATA", frequency_is(8.0), start=marker.index)
+        assert len(host.on("NBIRTH")) == 2
+        assert node.node.rebirths_ignored == 2
+
+        gateway.offline("fan-1")
+        death = await host.wait("DDEATH", lambda r: r.device == "fan-1")
+        assert death.payload.metrics == ()
+        gateway.reply("fan-1")
+        await host.wait("DBIRTH", lambda r: r.device == "fan-1", start=death.index)
+        gateway.reply("pump-1", running=True, hz=9.0)
+        await host.wait("DDATA", frequency_is(9.0), start=death.index)
+    assert host.problems == []
+
+
+def outcome_of(received: Received) -> tuple[object, object]:
+    values = received.values()
+    return values.get("Control/Last Outcome"), values.get("Control/Last Reason")
+
+
+def has_outcome(received: Received) -> bool:
+    return is_pump(received) and "Control/Last Outcome" in received.values()
+
+
+def write(name: str, value: float | bool) -> Metric:
+    datatype = DataType.BOOLEAN if isinstance(value, bool) else DataType.DOUBLE
+    return Metric(name=name, datatype=datatype, value=value)
+
+
+async def test_dcmd_goes_the_command_path_and_each_write_publishes_its_outcome(
+    broker: Broker, tmp_path: Path
+) -> None:
+    gateway = FakeGateway()
+    gateway.reply("pump-1", running=False, hz=0.0)
+    async with (
+        asyncio.timeout(LIMIT_S),
+        SparkplugHost(broker, GROUP) as host,
+        SparkplugAdapter(settings(broker, tmp_path, commands=True), gateway),
+    ):
+        birth = await host.wait("DBIRTH", is_pump)
+        assert outcome_of(birth) == ("", "")
+
+        await host.dcmd(NODE, "pump-1", write("Control/Reference Hz", 30.0))
+        done = await host.wait("DDATA", has_outcome)
+        assert outcome_of(done) == ("done", "")
+        ((drive, command),) = gateway.executed
+        assert (drive, command.action.value, command.reference_pct) == (
+            "pump-1",
+            "set_reference",
+            60.0,
+        )
+        assert command.actor == f"sparkplug:{NODE}"
+
+        await host.dcmd(NODE, "pump-1", write("Control/Reference Hz", 50.5))  # max 50 Hz
+        beyond = await host.wait("DDATA", has_outcome, start=done.index + 1)
+        assert outcome_of(beyond)[0] == "not_allowed"
+        assert "50" in str(outcome_of(beyond)[1])
+        await host.dcmd(NODE, "pump-1", write("Control/Reference Hz", -5.0))
+        negative = await host.wait("DDATA", has_outcome, start=beyond.index + 1)
+        assert outcome_of(negative)[0] == "invalid"
+        await host.dcmd(NODE, "pump-1", write("Output Frequency", 10.0))
+        not_writable = await host.wait("DDATA", has_outcome, start=negative.index + 1)
+        assert outcome_of(not_writable)[0] == "invalid"
+        assert "not writable" in str(outcome_of(not_writable)[1])
+        assert len(gateway.executed) == 1  # no refusal reached a line
+
+        await host.dcmd(NODE, "pump-1", write("Control/Run", True), write("Control/Reset", True))
+        started = await host.wait("DDATA", has_outcome, start=not_writable.index + 1)
+        await host.wait("DDATA", has_outcome, start=started.index + 1)
+        assert [c.action.value for _, c in gateway.executed[1:]] == ["start", "reset"]
+    assert host.problems == []
+
+
+async def test_with_commands_off_a_dcmd_is_not_allowed_and_reaches_no_line(
+    broker: Broker, tmp_path: Path
+) -> None:
+    gateway = FakeGateway()
+    gateway.reply("pump-1")
+    async with (
+        asyncio.timeout(LIMIT_S),
+        SparkplugHost(broker, GROUP) as host,
+        SparkplugAdapter(settings(broker, tmp_path), gateway),
+    ):
+        await host.wait("DBIRTH", is_pump)
+        await host.dcmd(NODE, "pump-1", write("Control/Run", True))
+        refused = await host.wait("DDATA", has_outcome)
+        assert outcome_of(refused) == (
+            "not_allowed",
+            "commands over Sparkplug are off (sparkplug.commands: false)",
+        )
+    assert gateway.executed == []
+    assert host.problems == []
