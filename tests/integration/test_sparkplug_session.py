@@ -14,6 +14,7 @@ from fcmaster.adapters.sparkplug.payload import DataType, Metric
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.mosquitto import Broker
 from tests.integration.sparkplug_host import Received, SparkplugHost
+from tests.integration.waiting import wait_for
 
 LIMIT_S = 30.0
 GROUP, NODE = "Plant", "gw-1"
@@ -260,3 +261,64 @@ async def test_with_commands_off_a_dcmd_is_not_allowed_and_reaches_no_line(
         )
     assert gateway.executed == []
     assert host.problems == []
+
+
+async def changes(node: SparkplugAdapter, gateway: FakeGateway, steps: list[float]) -> None:
+    """One reply per step, each taken in by the edge node before the next (none conflated)."""
+    for hz in steps:
+        expected = node.forward.last_n + 1
+        gateway.reply("pump-1", running=True, hz=hz)
+        await wait_for(lambda: node.forward.last_n >= expected)  # noqa: B023 - awaited here
+
+
+def history(host: SparkplugHost) -> list[tuple[object, int | None]]:
+    """The pump's historical Output Frequency values and their times, in arrival order."""
+    return [
+        (m.value, m.timestamp)
+        for r in host.on("DDATA", "pump-1")
+        for m in r.payload.metrics
+        if m.is_historical and m.name == "Output Frequency"
+    ]
+
+
+async def test_changes_in_a_broker_outage_and_at_its_failing_moment_arrive_as_history_in_order(
+    broker: Broker, tmp_path: Path
+) -> None:
+    gateway = FakeGateway()
+    gateway.reply("pump-1", running=True, hz=1.0)
+    stuck = [round(1.0 + i / 10, 1) for i in range(1, 11)]  # 1.1 … 2.0: into a frozen broker
+    away = [round(2.0 + i / 10, 1) for i in range(1, 11)]  # 2.1 … 3.0: while it is gone
+    async with (
+        asyncio.timeout(LIMIT_S),
+        SparkplugAdapter(settings(broker, tmp_path), gateway) as node,
+    ):
+        async with SparkplugHost(broker, GROUP) as host:
+            await host.wait("DBIRTH", is_pump)
+        await wait_for(lambda: node.forward.confirmed >= node.forward.last_n)
+        # The broker freezes: the connection stays open and what the node writes to its
+        # socket is lost with the broker, before anyone can notice.
+        broker.pause()
+        await changes(node, gateway, stuck)
+        await wait_for(lambda: node.published_through >= node.forward.last_n)  # in the socket
+        barriers = node.barriers
+        await wait_for(lambda: node.barriers > barriers)  # and a barrier asked after them
+        await broker.stop()
+        await changes(node, gateway, away)
+        await broker.start()
+        async with SparkplugHost(broker, GROUP) as host:
+            birth = await host.wait("NBIRTH")
+            # one more for each CONNECT, refused ones while the broker was away too
+            assert birth.values()["bdSeq"] == node.node.bd_seq > 0
+            live = await host.wait("DBIRTH", is_pump)
+            assert live.values()["Output Frequency"] == 3.0
+            while len(history(host)) < len(stuck + away):
+                await host.wait("DDATA", is_pump, start=len(host.received))
+            assert [value for value, _ in history(host)] == stuck + away
+            times = [at for _, at in history(host)]
+            assert times == sorted(times)
+            assert all(r.index > live.index for r in host.on("DDATA", "pump-1"))
+            gateway.reply("pump-1", running=True, hz=4.0)  # live again, not historical
+            now = await host.wait("DDATA", frequency_is(4.0))
+            assert not now.metric("Output Frequency").is_historical
+        assert host.problems == []
+        assert node.forward.replayed == len(stuck + away)

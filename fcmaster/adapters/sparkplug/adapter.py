@@ -135,8 +135,10 @@ class SparkplugAdapter:
         self._client: aiomqtt.Client | None = None
         self._rng = random.Random()
         self._entered = False
+        self._was_online = False  # the node's phase as the store last heard of it
         self.connected = asyncio.Event()
         self.connections = 0
+        self.barriers = 0  # barriers asked for
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -147,8 +149,10 @@ class SparkplugAdapter:
         self._entered = True
         self._subscription = self._gateway.hub.subscribe(kinds=(DriveUpdated,))
         self.forward.start()
-        for state in self._gateway.fleet.snapshot():
-            self._update(state)
+        for state in self._gateway.fleet.snapshot():  # where things stand: told by the births
+            self._readings[state.name] = self._readings_of(state)
+            self._online[state.name] = state.online
+            self._buses[state.name] = state.bus
         self._tasks = [
             asyncio.create_task(self._pump(self._subscription), name="sparkplug.pump"),
             asyncio.create_task(self._connect_forever(), name="sparkplug.connection"),
@@ -266,12 +270,13 @@ class SparkplugAdapter:
 
     def _node_effects(self, effects: list[Effect] | None) -> None:
         """Effects of the node's own rules (births, deaths); the store hears of a birth."""
-        was_online = self.node.phase is Phase.ONLINE
         self._apply(effects or [])
-        if self.node.phase is Phase.ONLINE and not was_online:
+        online = self.node.phase is Phase.ONLINE
+        if online and not self._was_online:
             self.forward.session_live()
-        elif was_online and self.node.phase is not Phase.ONLINE:
+        elif self._was_online and not online:
             self.forward.session_ended()
+        self._was_online = online
 
     # -- the connection -------------------------------------------------------------------
 
@@ -345,6 +350,7 @@ class SparkplugAdapter:
                 self._idle.set()
                 self.node.disconnected()
                 self.forward.session_ended()
+                self._was_online = False
 
     def _receive(self, message: aiomqtt.Message) -> None:
         payload = message.payload
@@ -385,8 +391,14 @@ class SparkplugAdapter:
             if number is not None:
                 self._sent_n = max(self._sent_n, number)
 
+    @property
+    def published_through(self) -> int:
+        """The last change number handed to the connection (not yet proven received)."""
+        return self._sent_n
+
     async def _barrier(self, client: aiomqtt.Client) -> None:
         """Wait until the broker has taken in everything published so far on ``client``."""
+        self.barriers += 1
         await client.unsubscribe(f"fcmaster/barrier/{self.client_id}")
 
     async def _barriers(self, client: aiomqtt.Client) -> None:
@@ -411,13 +423,13 @@ class SparkplugAdapter:
                 await self._clock.sleep(DRAIN_IDLE_S)
                 continue
             started = self._clock.now()
-            for device, history in _by_device(changes):
+            for device, (history, rows) in _by_device(changes).items():
                 await self._idle.wait()  # live data first: history only into an empty queue
                 if not self.node.is_born(device):
-                    self.forward.unborn += len(history)
+                    self.forward.unborn += rows
                     continue
                 self._apply(self.node.device_history(device, history, self._now_ms()))
-                self.forward.replayed += len(history)
+                self.forward.replayed += rows
             await self._idle.wait()
             client = self._client
             if client is None:
@@ -429,12 +441,14 @@ class SparkplugAdapter:
                 await self._clock.sleep(pace_s)
 
 
-def _by_device(changes: list[Change]) -> list[tuple[str, list[tuple[str, Reading]]]]:
-    """Changes grouped by device, each group in the order they were made."""
-    groups: dict[str, list[tuple[str, Reading]]] = {}
+def _by_device(changes: list[Change]) -> dict[str, tuple[list[tuple[str, Reading]], int]]:
+    """Changes grouped by device (readings in the order made, and how many changes)."""
+    groups: dict[str, tuple[list[tuple[str, Reading]], int]] = {}
     for change in changes:
-        groups.setdefault(change.device, []).extend(change.readings)
-    return list(groups.items())
+        readings, count = groups.get(change.device, ([], 0))
+        readings.extend(change.readings)
+        groups[change.device] = (readings, count + 1)
+    return groups
 
 
 def _report_crash(task: asyncio.Task[None]) -> None:

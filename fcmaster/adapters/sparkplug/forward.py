@@ -110,6 +110,11 @@ class Forward:
         if self._live is not None:
             self._live[1] = max(self._live[1], min(through, self.last_n))
 
+    @property
+    def confirmed(self) -> int:
+        """The last change number the broker is known to have (0: none in this session)."""
+        return 0 if self._live is None else self._live[1]
+
     def _delivered(self, n: int) -> bool:
         return any(low <= n <= high for low, high in self._closed) or (
             self._live is not None and self._live[0] <= n <= self._live[1]
