@@ -139,6 +139,7 @@ class SparkplugAdapter:
         self.connected = asyncio.Event()
         self.connections = 0
         self.barriers = 0  # barriers asked for
+        self.barriers_answered = 0
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -400,6 +401,7 @@ class SparkplugAdapter:
         """Wait until the broker has taken in everything published so far on ``client``."""
         self.barriers += 1
         await client.unsubscribe(f"fcmaster/barrier/{self.client_id}")
+        self.barriers_answered += 1
 
     async def _barriers(self, client: aiomqtt.Client) -> None:
         confirmed = 0
