@@ -196,6 +196,13 @@ class SparkplugHost:
             r for r in self.received if r.kind == kind and (device is None or r.device == device)
         ]
 
+    async def wait_count(self, kind: str, count: int, *, start: int = 0) -> list[Received]:
+        """The first ``count`` messages of ``kind`` from index ``start`` on."""
+        while len(found := [r for r in self.received[start:] if r.kind == kind]) < count:
+            self._arrived.clear()
+            await self._arrived.wait()
+        return found[:count]
+
     async def wait(
         self, kind: str, check: Callable[[Received], bool] | None = None, *, start: int = 0
     ) -> Received:
