@@ -222,7 +222,8 @@ async def _outage(
     )
     for plan in gateway.plans:  # online from the start: born at the first connection
         gateway.reply(plan, 0.0)
-    async with SparkplugAdapter(settings, gateway) as node, hosted(host, broker.port):
+    node_gateway: Any = gateway  # the parts of the Gateway protocol the adapter uses
+    async with SparkplugAdapter(settings, node_gateway) as node, hosted(host, broker.port):
         await node.connected.wait()
         producer = asyncio.create_task(produce())
         await asyncio.sleep(args.warmup_s)
@@ -255,8 +256,7 @@ async def _outage(
         replayed, unborn = node.forward.replayed, node.forward.unborn
     file_bytes = sum(p.stat().st_size for p in store.parent.glob("sparkplug.db*"))
 
-    outage = phases["outage"]
-    delivered = [n for n in outage if n in host.seen]
+    delivered = [n for n in phases["outage"] if n in host.seen]
     in_order = all(
         a < b
         for index in range(args.drives)
@@ -280,8 +280,8 @@ async def _outage(
             "warmup_s": args.warmup_s,
         },
         "changes_made": {name: len(numbers) for name, numbers in phases.items()},
-        "outage_changes_delivered_pct": 100.0 * len(delivered) / max(1, len(outage)),
-        "outage_changes_missing": len(outage) - len(delivered),
+        "outage_changes_delivered_pct": 100.0 * len(delivered) / max(1, len(phases["outage"])),
+        "outage_changes_missing": len(phases["outage"]) - len(delivered),
         "history_in_order_per_drive": in_order,
         "history_received": len(host.history),
         "duplicates": sum(c - 1 for c in host.seen.values() if c > 1),
