@@ -181,7 +181,7 @@ class EdgeNode:
         self._born.clear()
         self.phase = Phase.WAITING
         if self.primary_host_id is None:
-            return self._births(now, now_ms, devices)
+            return self._births(now_ms, devices)
         return []
 
     def disconnected(self) -> None:
@@ -205,7 +205,7 @@ class EdgeNode:
             return []  # an older STATE than one already taken: stale
         self._host_at = timestamp
         if online and self.phase is Phase.WAITING:
-            return self._births(now, now_ms, devices)
+            return self._births(now_ms, devices)
         if not online and self.phase is Phase.ONLINE:
             self.phase = Phase.WAITING
             return [self.death(now_ms), Disconnect("the primary host went offline")]
@@ -222,9 +222,9 @@ class EdgeNode:
             self.rebirths_ignored += 1
             return []
         self._rebirth_at = now
-        return self._births(now, now_ms, devices)
+        return self._births(now_ms, devices)
 
-    def _births(self, now: float, now_ms: int, devices: Devices) -> list[Effect]:
+    def _births(self, now_ms: int, devices: Devices) -> list[Effect]:
         self.phase = Phase.ONLINE
         self.births += 1
         self._seq = 0
