@@ -42,7 +42,7 @@ import aiomqtt
 import structlog
 
 from fcmaster.adapters.gateway import Gateway
-from fcmaster.adapters.mqtt import _cancel, _tls_context
+from fcmaster.adapters.mqtt import _cancel, _refused, _tls_context
 from fcmaster.adapters.settings import SparkplugSettings
 from fcmaster.adapters.sparkplug.commands import DeviceCommands
 from fcmaster.adapters.sparkplug.forward import Change, Forward, bd_seq_path, next_bd_seq
@@ -328,7 +328,9 @@ class SparkplugAdapter:
         client.pending_calls_threshold = MAX_QUEUED
         async with client:
             for topic in self.node.subscriptions():
-                await client.subscribe(topic, qos=1)
+                granted = await client.subscribe(topic, qos=1)
+                if any(_refused(code) for code in granted):  # the broker's ACL says no
+                    log.error("sparkplug.subscribe_refused", topic=topic)
             self.connections += 1
             self._client = client
             self.connected.set()

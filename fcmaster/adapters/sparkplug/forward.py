@@ -60,7 +60,7 @@ class Forward:
 
     def __init__(self, path: str | None, *, max_bytes: int, max_age_s: float) -> None:
         store = SequenceStore(path, table="sparkplug", max_bytes=max_bytes, max_age_s=max_age_s)
-        self.writer = BackgroundWriter(store, name="sparkplug")
+        self.writer = BackgroundWriter(store, name="sparkplug", encode=_row)
         self.epoch = os.urandom(6).hex()  # tells this process's rows from a previous one's
         self.last_n = 0  # the last change numbered
         self._live: list[int] | None = None  # [live_from, confirmed] of the current session
@@ -80,15 +80,8 @@ class Forward:
     def record(self, bus: str, device: str, changes: Mapping[str, Reading], at: float) -> int:
         """Keep ``changes`` of ``device`` (never blocks); the change's number."""
         self.last_n += 1
-        body = json.dumps(
-            [
-                self.epoch,
-                self.last_n,
-                [[name, r.datatype.value, r.value, r.at_ms] for name, r in changes.items()],
-            ],
-            separators=(",", ":"),
-        )
-        self.writer.put(Row(at=at, kind=KIND, bus=bus, drive=device, body=body))
+        # made into a row on the writer's thread: the loop only queues it
+        self.writer.put((at, bus, device, self.epoch, self.last_n, dict(changes)))
         return self.last_n
 
     # -- sessions -------------------------------------------------------------------------
@@ -167,6 +160,13 @@ class Forward:
             return await asyncio.to_thread(self.writer.call, lambda s: s.used_bytes())
         except sqlite3.Error:
             return 0
+
+
+def _row(item: tuple[float, str, str, str, int, dict[str, Reading]]) -> Row:
+    at, bus, device, epoch, n, changes = item
+    items = [[name, r.datatype.value, r.value, r.at_ms] for name, r in changes.items()]
+    body = json.dumps([epoch, n, items], separators=(",", ":"))
+    return Row(at=at, kind=KIND, bus=bus, drive=device, body=body)
 
 
 def _parse(row: Stored) -> tuple[str, int, Change] | None:
