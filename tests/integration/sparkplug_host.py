@@ -43,6 +43,7 @@ class Received:
     device: str | None
     payload: Payload
     index: int  # its place among every message received
+    raw: bytes = b""  # the payload's bytes as they arrived
 
     def metric(self, name: str) -> Metric:
         """The metric ``name`` (the last one of that name)."""
@@ -150,8 +151,9 @@ class SparkplugHost:
         kind, node = parts[2], parts[3]
         device = parts[4] if len(parts) > 4 else None
         assert isinstance(message.payload, bytes | bytearray)
-        payload = decode_payload(bytes(message.payload))
-        self.received.append(Received(kind, node, device, payload, len(self.received)))
+        raw = bytes(message.payload)
+        payload = decode_payload(raw)
+        self.received.append(Received(kind, node, device, payload, len(self.received), raw))
         self._judge(kind, node, device, payload)
 
     def _judge(self, kind: str, node: str, device: str | None, payload: Payload) -> None:

@@ -14,6 +14,7 @@ from fcmaster.adapters.sparkplug.payload import DataType, Metric
 from tests.integration.gateway_double import FakeGateway
 from tests.integration.mosquitto import Broker
 from tests.integration.sparkplug_host import Received, SparkplugHost
+from tests.integration.tahu import tahu_decode, tahu_marks, tahu_shape
 from tests.integration.waiting import wait_for
 
 LIMIT_S = 30.0
@@ -132,6 +133,12 @@ async def test_births_wait_for_the_primary_host_and_pair_with_deaths_by_bdseq(
         await host.wait("NDEATH", start=mark)
     assert host.deaths == [(0, True), (1, True)]
     assert host.problems == []
+    # An independent decoder reads every message as we do: births, data, deaths.
+    if not tahu_marks():
+        kinds = {r.kind for r in host.received}
+        assert kinds >= {"NBIRTH", "DBIRTH", "DDATA", "NDEATH"}
+        decoded = tahu_decode([r.raw for r in host.received])
+        assert decoded == [tahu_shape(r.payload) for r in host.received]
 
 
 def frequency_is(hz: float) -> Callable[[Received], bool]:
