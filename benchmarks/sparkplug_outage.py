@@ -241,6 +241,7 @@ async def _outage(
         drain_at = now()
         async with hosted(host, broker.port):
             outage = set(phases["outage"])
+            replayed, last_missing, stalled = -1, -1, 0
             while now() - drain_at < args.drain_limit_s:
                 await asyncio.sleep(1.0)
                 largest = max(largest, await node.forward.size_bytes())
@@ -248,12 +249,20 @@ async def _outage(
                 _say(f"missing {missing}, replayed {node.forward.replayed}")
                 if not missing:
                     break
+                if node.forward.replayed == replayed and missing == last_missing:
+                    stalled += 1
+                    if stalled >= 10:  # ten seconds without progress: it will not come
+                        break
+                else:
+                    stalled = 0
+                replayed, last_missing = node.forward.replayed, missing
             drained_s = now() - drain_at
             producer.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await producer
             await asyncio.sleep(1.0)
         replayed, unborn = node.forward.replayed, node.forward.unborn
+        recorded, dropped = node.forward.last_n, node.forward.writer.dropped
     file_bytes = sum(p.stat().st_size for p in store.parent.glob("sparkplug.db*"))
 
     delivered = [n for n in phases["outage"] if n in host.seen]
@@ -282,9 +291,12 @@ async def _outage(
         "changes_made": {name: len(numbers) for name, numbers in phases.items()},
         "outage_changes_delivered_pct": 100.0 * len(delivered) / max(1, len(phases["outage"])),
         "outage_changes_missing": len(phases["outage"]) - len(delivered),
+        "missing_sample": [n for n in phases["outage"] if n not in host.seen][:20],
         "history_in_order_per_drive": in_order,
         "history_received": len(host.history),
         "duplicates": sum(c - 1 for c in host.seen.values() if c > 1),
+        "changes_taken_in": recorded,  # the rest were conflated by the hub before it read them
+        "store_dropped": dropped,
         "replayed_rows": replayed,
         "unborn_rows": unborn,
         "drain_s": drained_s,

@@ -8,8 +8,10 @@ the :class:`~fcmaster.adapters.sparkplug.forward.Forward` store (every change on
 the broker is known to have it) and :class:`~fcmaster.adapters.sparkplug.commands.DeviceCommands`
 (DCMD through the gateway). Its tasks:
 
-* the **pump** reads the hub subscription (it never makes the bus wait: snapshots conflate
-  there) and turns each drive's snapshot into readings: a drive come online is a DBIRTH,
+* the **pump** reads the hub subscription (it never makes the bus wait: the hub only files
+  each snapshot, in order and up to a bound — not conflated, since a value superseded before
+  the pump read it would be missing from the history) and turns each drive's snapshot into
+  readings: a drive come online is a DBIRTH,
   gone offline a DDEATH, otherwise what changed is numbered and stored, and, when the node
   is online, queued as a DDATA. Nothing here waits for the broker.
 * the **connection loop** takes the next ``bdSeq`` (kept in a file beside the store before the
@@ -76,6 +78,7 @@ BARRIER_S = 0.2  # how often what was published is confirmed to the store
 DRAIN_IDLE_S = 0.5  # how often an empty store is looked at again
 HISTORY_ROWS_PER_S = 5000.0  # the drain's pace, at most
 MAX_QUEUED = 20_000  # queued live messages past which the broker is too slow: reconnect
+MAX_BEHIND = 100_000  # drive snapshots the pump may fall behind before the oldest are dropped
 
 
 class _Leave(Exception):
@@ -148,7 +151,11 @@ class SparkplugAdapter:
         if self._entered:
             raise RuntimeError("SparkplugAdapter is not re-entrant")
         self._entered = True
-        self._subscription = self._gateway.hub.subscribe(kinds=(DriveUpdated,))
+        # Every snapshot, not the latest: each change is kept for the store (bounded; what
+        # falls off a pump this far behind is counted and logged).
+        self._subscription = self._gateway.hub.subscribe(
+            kinds=(DriveUpdated,), conflate=False, max_events=MAX_BEHIND
+        )
         self.forward.start()
         for state in self._gateway.fleet.snapshot():  # where things stand: told by the births
             self._readings[state.name] = self._readings_of(state)
