@@ -188,7 +188,7 @@ class SparkplugAdapter:
             pump, connection = self._tasks
             await _cancel(pump)
             client = self._client
-            if client is not None and self.node.phase is not Phase.OFFLINE:
+            if client is not None and self.node.phase is Phase.ONLINE:  # a host saw it born
                 death = self.node.death(self._now_ms())
                 with contextlib.suppress(aiomqtt.MqttError, TimeoutError):
                     await client.publish(death.topic, death.payload, qos=1, timeout=LEAVE_S)
