@@ -65,6 +65,7 @@ from fcmaster.adapters.sparkplug.node import (
 )
 from fcmaster.adapters.sparkplug.payload import DataType
 from fcmaster.bus.commands import CommandResult
+from fcmaster.errors import FcmasterError
 from fcmaster.hub import EventsDropped, Subscription
 from fcmaster.state import DriveState, DriveUpdated
 
@@ -81,7 +82,7 @@ MAX_QUEUED = 20_000  # queued live messages past which the broker is too slow: r
 MAX_BEHIND = 100_000  # drive snapshots the pump may fall behind before the oldest are dropped
 
 
-class _Leave(Exception):
+class _Leave(FcmasterError):
     """The node leaves the session on purpose (its NDEATH is published)."""
 
 
