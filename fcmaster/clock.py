@@ -13,13 +13,23 @@ a few tens of microseconds instead (on a busy VM, a few hundred), and
 :class:`MonotonicClock` takes out what remains by waking early and spinning the last
 stretch. select() handles file descriptors below 1024, which a gateway with a handful of
 ports and connections stays far below.
+
+Unlike epoll, select() fails whole (EBADF) when one registered descriptor was closed behind
+the loop's back, and the loop would die with it. A library that registers from another
+thread can do that: aiomqtt schedules its ``add_reader`` with ``call_soon_threadsafe``, so a
+connection that fails at once has its socket closed before the registration runs. The
+selector here drops such descriptors (the loop's own ``remove_reader`` then finds nothing, as
+it allows) and selects again.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import ctypes
 import ctypes.util
+import errno
+import os
 import selectors
 import sys
 import time
@@ -216,7 +226,26 @@ def lower_timer_slack() -> bool:
         return False
 
 
+class ClosedFdSafeSelector(selectors.SelectSelector):
+    """select() that outlives a descriptor closed while registered (see the module docstring)."""
+
+    def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        """Ready keys, as SelectSelector's; a closed descriptor is unregistered first."""
+        try:
+            return super().select(timeout)
+        except OSError as exc:
+            if exc.errno != errno.EBADF:
+                raise
+        for key in list(self.get_map().values()):
+            try:
+                os.fstat(key.fd)
+            except OSError:
+                with contextlib.suppress(KeyError, ValueError):
+                    self.unregister(key.fileobj)
+        return super().select(0)
+
+
 def new_event_loop() -> asyncio.AbstractEventLoop:
     """An event loop whose timers keep sub-millisecond time (see the module docstring)."""
     lower_timer_slack()
-    return asyncio.SelectorEventLoop(selectors.SelectSelector())
+    return asyncio.SelectorEventLoop(ClosedFdSafeSelector())

@@ -45,6 +45,7 @@ from fcmaster.adapters.settings import (
     ModbusSettings,
     MqttSettings,
     OpcuaSettings,
+    SparkplugSettings,
     Token,
 )
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
@@ -61,6 +62,7 @@ from fcmaster.config_sections import (
     ModbusModel,
     MqttModel,
     OpcuaModel,
+    SparkplugModel,
     TlsModel,
     TokenModel,
 )
@@ -86,6 +88,7 @@ __all__ = [
     "ModbusModel",
     "MqttModel",
     "OpcuaModel",
+    "SparkplugModel",
     "TlsModel",
     "TokenModel",
     "load",
@@ -189,6 +192,7 @@ class ConfigModel(_Model):
     mqtt: MqttModel | None = None
     modbus: ModbusModel | None = None
     opcua: OpcuaModel | None = None
+    sparkplug: SparkplugModel | None = None
     metrics: MetricsModel | None = None
     journal: JournalModel | None = None
     logging: LoggingModel = LoggingModel()
@@ -221,6 +225,12 @@ class Config:
         return None if self.model.mqtt is None else self.model.mqtt.settings()
 
     @property
+    def sparkplug(self) -> SparkplugSettings | None:
+        """The Sparkplug adapter's settings; a relative store path is from the file's folder."""
+        model = self.model.sparkplug
+        return None if model is None else model.settings(self._relative(model.store))
+
+    @property
     def modbus(self) -> ModbusSettings | None:
         """The Modbus TCP adapter's settings, with every drive's unit id."""
         return (
@@ -243,12 +253,15 @@ class Config:
         model = self.model.journal
         if model is None:
             return None
-        path = model.path
+        return StoreSettings(
+            path=self._relative(model.path), max_mb=model.max_mb, max_days=model.max_days
+        )
+
+    def _relative(self, path: str | None) -> str | None:
+        """A store's path: taken from the config file's folder when relative; None in memory."""
         if path is not None and path != MEMORY and self.path is not None:
-            path = str(Path(self.path).parent / path)  # an absolute path stays as it is
-        elif path == MEMORY:
-            path = None
-        return StoreSettings(path=path, max_mb=model.max_mb, max_days=model.max_days)
+            return str(Path(self.path).parent / path)  # an absolute path stays as it is
+        return None if path == MEMORY else path
 
     def modbus_units(self) -> dict[str, int]:
         """Each drive's Modbus unit id by name; ConfigError if two drives would share one.
@@ -460,11 +473,13 @@ def _check(
                 sim_line(lines[b], bus.simulation or {}, clock=MonotonicClock())
             except ConfigError as exc:
                 problems.extend(exc.problems)
-    if model.mqtt is not None and model.mqtt.tls is not None:
-        for key in ("ca", "cert", "key"):
-            file = getattr(model.mqtt.tls, key)
-            if file is not None and not os.access(file, os.R_OK):
-                problems.append((f"mqtt.tls.{key}", f"cannot read {file}"))
+    for section in (model.mqtt, model.sparkplug):
+        if section is not None and section.tls is not None:
+            name = "mqtt" if section is model.mqtt else "sparkplug"
+            for key in ("ca", "cert", "key"):
+                file = getattr(section.tls, key)
+                if file is not None and not os.access(file, os.R_OK):
+                    problems.append((f"{name}.tls.{key}", f"cannot read {file}"))
     mqtt = model.mqtt
     if mqtt is not None and mqtt.commands and not mqtt.trust_broker:
         operators = [t for t in (model.http.tokens if model.http else ()) if t.role == "operator"]

@@ -21,6 +21,7 @@ from fcmaster.adapters.settings import (
     ModbusSettings,
     MqttSettings,
     OpcuaSettings,
+    SparkplugSettings,
     TlsSettings,
     Token,
     modbus_listen,
@@ -93,24 +94,11 @@ class MqttModel(StrictModel):
     @field_validator("url")
     @classmethod
     def _check_url(cls, url: str) -> str:
-        parts = urlsplit(url)
-        if parts.scheme not in ("mqtt", "mqtts"):
-            raise ValueError("use mqtt://host:port or mqtts://host:port")
-        if not parts.hostname:
-            raise ValueError("the URL names no host")
-        if parts.username is not None or parts.password is not None:
-            raise ValueError("put credentials in mqtt.username and mqtt.password")
-        _ = parts.port  # raises ValueError for a port that is not a number in range
-        return url
+        return broker_url(url, "mqtt")
 
     @model_validator(mode="after")
     def _check_tls(self) -> MqttModel:
-        if self.tls is not None and urlsplit(self.url).scheme != "mqtts":
-            raise ValueError("a tls section needs an mqtts:// url (mqtt:// is plain TCP)")
-        if self.tls is not None and self.tls.key is not None and self.tls.cert is None:
-            raise ValueError("tls.key belongs to a client certificate: give tls.cert too")
-        if self.reconnect_min_s > self.reconnect_max_s:
-            raise ValueError("reconnect_min_s is above reconnect_max_s")
+        check_connection(self.url, self.tls, self.reconnect_min_s, self.reconnect_max_s)
         return self
 
     def settings(self) -> MqttSettings:
@@ -127,6 +115,79 @@ class MqttModel(StrictModel):
         ):
             raise ValueError("a topic without wildcards (+, #) or a leading or trailing /")
         return topic
+
+
+def broker_url(url: str, section: str) -> str:
+    """``url`` if it is ``mqtt://host[:port]`` or ``mqtts://…``; ValueError saying what to fix."""
+    parts = urlsplit(url)
+    if parts.scheme not in ("mqtt", "mqtts"):
+        raise ValueError("use mqtt://host:port or mqtts://host:port")
+    if not parts.hostname:
+        raise ValueError("the URL names no host")
+    if parts.username is not None or parts.password is not None:
+        raise ValueError(f"put credentials in {section}.username and {section}.password")
+    _ = parts.port  # raises ValueError for a port that is not a number in range
+    return url
+
+
+def check_connection(
+    url: str, tls: TlsModel | None, reconnect_min_s: float, reconnect_max_s: float
+) -> None:
+    """The rules a broker connection's keys keep together; ValueError for the first broken."""
+    if tls is not None and urlsplit(url).scheme != "mqtts":
+        raise ValueError("a tls section needs an mqtts:// url (mqtt:// is plain TCP)")
+    if tls is not None and tls.key is not None and tls.cert is None:
+        raise ValueError("tls.key belongs to a client certificate: give tls.cert too")
+    if reconnect_min_s > reconnect_max_s:
+        raise ValueError("reconnect_min_s is above reconnect_max_s")
+
+
+def _sparkplug_id(text: str) -> str:
+    # Sparkplug 3.0, "Topic Namespace Elements": an id is a topic level, so never + / #
+    if not text or set(text) & {"+", "/", "#"}:
+        raise ValueError("a Sparkplug id is a non-empty topic level, without + / or #")
+    return text
+
+
+SparkplugId = Annotated[str, AfterValidator(_sparkplug_id)]
+
+
+class SparkplugModel(StrictModel):
+    """The Sparkplug B edge node: its own MQTT session, TLS and credentials as ``mqtt``."""
+
+    url: str = "mqtt://127.0.0.1:1883"
+    group_id: SparkplugId
+    edge_node_id: SparkplugId
+    primary_host_id: SparkplugId | None = None
+    # DCMD obeyed only when switched on; the broker's ACLs then decide who may publish it.
+    commands: bool = False
+    store: str | None = Field(default=None, min_length=1)  # None: in memory
+    store_max_mb: float = Field(default=100.0, gt=0)
+    store_max_days: float = Field(default=7.0, gt=0)
+    client_id: str | None = Field(default=None, min_length=1)
+    username: str | None = None
+    password: str | None = None
+    tls: TlsModel | None = None
+    keepalive_s: int = Field(default=30, ge=5, le=3600)
+    reconnect_min_s: float = Field(default=1.0, gt=0)
+    reconnect_max_s: float = Field(default=60.0, gt=0)
+    rebirth_min_s: float = Field(default=5.0, ge=0)
+
+    @field_validator("url")
+    @classmethod
+    def _check_url(cls, url: str) -> str:
+        return broker_url(url, "sparkplug")
+
+    @model_validator(mode="after")
+    def _check_tls(self) -> SparkplugModel:
+        check_connection(self.url, self.tls, self.reconnect_min_s, self.reconnect_max_s)
+        return self
+
+    def settings(self, store: str | None) -> SparkplugSettings:
+        """What the Sparkplug adapter is told, with the store's path as resolved."""
+        fields = self.model_dump(exclude={"tls", "store"})
+        tls = None if self.tls is None else TlsSettings(**self.tls.model_dump())
+        return SparkplugSettings(**fields, tls=tls, store=store)
 
 
 def _cidr(text: str) -> str:

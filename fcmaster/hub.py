@@ -13,6 +13,10 @@ things, and its memory is bounded whatever the subscriber does:
   ``max_events``; past that the oldest is dropped and counted, and the subscriber is told
   with an :class:`EventsDropped` before the next event it receives.
 
+A subscriber that must see every snapshot (a store-and-forward queue: a value superseded
+before it read it would be missing from the history) subscribes with ``conflate=False``:
+its snapshots are then kept in order like discrete events, within the same bound.
+
 Delivery keeps arrival order: each pending item carries the sequence number it was filed
 under (a snapshot keeps the number of its first undelivered version), and the consumer takes
 whichever head is older.
@@ -56,8 +60,10 @@ class Subscription:
         drive: str | None,
         kinds: tuple[type, ...] | None,
         max_events: int,
+        conflate: bool = True,
     ) -> None:
         self._hub = hub
+        self.conflate = conflate
         self.bus = bus
         self.drive = drive
         self.kinds = kinds
@@ -81,7 +87,7 @@ class Subscription:
     def offer(self, event: Event) -> None:
         """File ``event`` (called by the hub; never blocks)."""
         self._seq += 1
-        if isinstance(event, DriveUpdated):
+        if isinstance(event, DriveUpdated) and self.conflate:
             key = event.state.key
             pending = self._latest.get(key)
             if pending is None:
@@ -163,9 +169,15 @@ class Hub:
         drive: str | None = None,
         kinds: tuple[type, ...] | None = None,
         max_events: int = DEFAULT_MAX_EVENTS,
+        conflate: bool = True,
     ) -> Subscription:
-        """A new subscription to events matching the filters (None: everything)."""
-        subscription = Subscription(self, bus=bus, drive=drive, kinds=kinds, max_events=max_events)
+        """A new subscription to events matching the filters (None: everything).
+
+        ``conflate=False``: every snapshot in order (bounded by ``max_events``), not the latest.
+        """
+        subscription = Subscription(
+            self, bus=bus, drive=drive, kinds=kinds, max_events=max_events, conflate=conflate
+        )
         self._subscriptions.append(subscription)
         return subscription
 

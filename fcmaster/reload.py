@@ -51,7 +51,7 @@ from fcmaster.state import FleetState
 
 log = structlog.get_logger("fcmaster.reload")
 
-ADAPTER_SECTIONS = ("http", "mqtt", "modbus", "opcua")
+ADAPTER_SECTIONS = ("http", "mqtt", "modbus", "opcua", "sparkplug")
 STOP_TIMEOUT_S = 5.0  # for the stops of drives that leave (on_shutdown: stop)
 
 
@@ -156,7 +156,7 @@ def compare(old: Config, new: Config) -> Changes:
             why.append("metrics")
         if section in ("mqtt", "opcua") and after is not None and _tokens(old) != _tokens(new):
             why.append("http.tokens")
-        if section in ("modbus", "opcua") and after is not None and drives_changed:
+        if section in ("modbus", "opcua", "sparkplug") and after is not None and drives_changed:
             why.append("the drives")
         if why and (before is not None or after is not None):
             changes.restart.append(section)

@@ -83,6 +83,7 @@ ADAPTERS = {
     "mqtt": "fcmaster.adapters.mqtt:MqttAdapter",
     "modbus": "fcmaster.adapters.modbus:ModbusAdapter",
     "opcua": "fcmaster.adapters.opcua:OpcuaAdapter",
+    "sparkplug": "fcmaster.adapters.sparkplug.adapter:SparkplugAdapter",
 }
 
 

@@ -72,7 +72,7 @@ from fcmaster.adapters.mqtt_topics import (
     event_payload,
     is_significant,
 )
-from fcmaster.adapters.settings import MqttSettings
+from fcmaster.adapters.settings import MqttSettings, SparkplugSettings
 from fcmaster.errors import ConfigError
 from fcmaster.hub import EventsDropped, Subscription
 from fcmaster.state import (
@@ -366,7 +366,9 @@ def _refused(code: int | ReasonCode) -> bool:
     return code.is_failure if isinstance(code, ReasonCode) else code >= 0x80
 
 
-def _tls_context(settings: MqttSettings) -> ssl.SSLContext:
+def _tls_context(
+    settings: MqttSettings | SparkplugSettings, section: str = "mqtt"
+) -> ssl.SSLContext:
     """A TLS context for mqtts:// with the configured CA, client certificate and key."""
     tls = settings.tls
     try:
@@ -374,7 +376,7 @@ def _tls_context(settings: MqttSettings) -> ssl.SSLContext:
         if tls is not None and tls.cert is not None:
             context.load_cert_chain(tls.cert, tls.key)
     except (OSError, ssl.SSLError) as exc:
-        raise ConfigError([("mqtt.tls", f"cannot load the certificates: {exc}")]) from exc
+        raise ConfigError([(f"{section}.tls", f"cannot load the certificates: {exc}")]) from exc
     if tls is not None and tls.insecure:
         context.check_hostname = False
         context.verify_mode = ssl.CERT_NONE

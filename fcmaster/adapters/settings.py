@@ -66,6 +66,32 @@ class MqttSettings:
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)
+class SparkplugSettings:
+    """The Sparkplug B edge node (``sparkplug:``); its own session on the broker at ``url``.
+
+    ``store`` is the store-and-forward file (None: in memory, lost at a restart), bounded by
+    ``store_max_mb`` and ``store_max_days``; ``bdSeq`` is kept in a file beside it.
+    """
+
+    group_id: str
+    edge_node_id: str
+    url: str = "mqtt://127.0.0.1:1883"
+    primary_host_id: str | None = None  # None: publish without waiting for a host's STATE
+    commands: bool = False
+    store: str | None = None
+    store_max_mb: float = 100.0
+    store_max_days: float = 7.0
+    client_id: str | None = None  # None: fcmaster-spb-{group_id}-{edge_node_id}
+    username: str | None = None
+    password: str | None = None
+    tls: TlsSettings | None = None
+    keepalive_s: int = 30
+    reconnect_min_s: float = 1.0
+    reconnect_max_s: float = 60.0
+    rebirth_min_s: float = 5.0  # Rebirth requests closer together than this are ignored
+
+
+@dataclass(slots=True, frozen=True, kw_only=True)
 class ModbusSettings:
     """The Modbus TCP server (``modbus:``).
 

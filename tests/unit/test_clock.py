@@ -1,6 +1,7 @@
 """MonotonicClock and the precise event loop: waits never end before their deadline."""
 
 import asyncio
+import os
 import time
 from functools import partial
 
@@ -155,3 +156,20 @@ def test_a_brief_wait_is_spun_to_its_deadline_and_a_longer_one_left_to_a_timer()
     assert not clock.wait_briefly(started + 0.01)
     assert clock.now() < started + 0.01  # it left the wait to a timer: not spun to its end
     assert clock.wait_briefly(started - 1.0)  # passed already: nothing to wait
+
+
+async def _close_behind_the_loops_back() -> str:
+    """A reader registered on a descriptor that is then closed without removing it."""
+    loop = asyncio.get_running_loop()
+    read_end, write_end = os.pipe()
+    loop.add_reader(read_end, lambda: None)
+    os.close(read_end)  # as a library that registers from another thread can leave it
+    os.close(write_end)
+    await asyncio.sleep(0.01)  # the loop selects, finds the closed descriptor, goes on
+    loop.remove_reader(read_end)  # the owner's late remove finds nothing, as asyncio allows
+    return "alive"
+
+
+def test_the_precise_loop_outlives_a_descriptor_closed_while_registered() -> None:
+    with asyncio.Runner(loop_factory=new_event_loop) as runner:
+        assert runner.run(_close_behind_the_loops_back()) == "alive"

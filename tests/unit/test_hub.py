@@ -45,6 +45,23 @@ def test_snapshots_of_one_drive_conflate_to_the_latest() -> None:
     assert sub.get_nowait() is None
 
 
+def test_without_conflation_every_snapshot_arrives_in_order_within_the_bound() -> None:
+    hub = Hub()
+    every = hub.subscribe(conflate=False, max_events=3)
+    latest = hub.subscribe()
+    for hz in (10.0, 20.0, 30.0, 40.0):
+        hub.publish(DriveUpdated(_state("pump-1", hz=hz)))
+    assert every.get_nowait() == EventsDropped(1)
+    taken = [every.get_nowait() for _ in range(3)]
+    assert [u.state.output_frequency_hz for u in taken if isinstance(u, DriveUpdated)] == [
+        20.0,
+        30.0,
+        40.0,
+    ]
+    assert every.get_nowait() is None
+    assert latest.pending == 1  # the others still conflate
+
+
 def test_a_conflated_snapshot_names_every_change_it_stands_for() -> None:
     hub = Hub()
     sub = hub.subscribe()

@@ -22,6 +22,9 @@ FACES: dict[str, set[str]] = {
     "fcmaster.adapters": {
         "BeyondLimits", "Gateway", "LineInfo", "parse_command", "refusal",
     },
+    "fcmaster.adapters.sparkplug": {
+        "EdgeNode", "Payload", "SparkplugAdapter", "decode_payload", "encode_payload",
+    },
     "fcmaster.bus": {
         "Action", "BusMaster", "BusObserver", "Command", "CommandResult", "DrivePlan",
         "DriveStats", "LinePlan", "LineStats", "OnStart", "Outcome", "SerialTransport",
