@@ -22,6 +22,7 @@ from fcmaster.adapters.command_json import loads, parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
 from fcmaster.adapters.mqtt_outbox import Outbox
 from fcmaster.adapters.mqtt_topics import Topics, result_payload
+from fcmaster.adapters.running import end_within
 from fcmaster.bus.audit import audit, payload_values
 from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.errors import UsageError
@@ -93,13 +94,7 @@ class CommandDesk:
 
     async def close(self, grace_s: float) -> None:
         """Give running commands ``grace_s`` to end; the rest end ``cancelled``."""
-        if self.running:
-            await asyncio.wait(self.running, timeout=grace_s)
-        late = list(self.running)
-        for task in late:
-            task.cancel()
-        if late:
-            await asyncio.wait(late)
+        await end_within(self.running, grace_s)
 
     def _command(self, bus: str, drive: str, data: Any) -> None:
         if not isinstance(data, dict):

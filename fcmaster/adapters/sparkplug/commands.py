@@ -23,6 +23,7 @@ import structlog
 
 from fcmaster.adapters.command_json import parse_command, refusal
 from fcmaster.adapters.gateway import Gateway
+from fcmaster.adapters.running import end_within
 from fcmaster.adapters.sparkplug.metrics import CONTROL_METRICS, REFERENCE_HZ, RESET, RUN
 from fcmaster.adapters.sparkplug.payload import Metric
 from fcmaster.bus.audit import audit
@@ -99,13 +100,7 @@ class DeviceCommands:
 
     async def close(self, grace_s: float) -> None:
         """Give running commands ``grace_s`` to end; the rest end ``cancelled``."""
-        if self.running:
-            await asyncio.wait(self.running, timeout=grace_s)
-        late = list(self.running)
-        for task in late:
-            task.cancel()
-        if late:
-            await asyncio.wait(late)
+        await end_within(self.running, grace_s)
 
     async def _execute(self, device: str, orders: list[Command]) -> None:
         for at, command in enumerate(orders):
