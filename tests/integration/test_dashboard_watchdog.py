@@ -50,8 +50,11 @@ async def test_the_drive_view_shows_the_watchdog_verdicts_of_the_demo(browser: B
         }
         for name, text in expected.items():
             row = page.locator(f'tr[data-drive="{name}"]')
-            # a person reads the table first: the row shows its verdict badge (or none)
-            await expect(row.get_by_test_id("watchdog")).not_to_have_text("watchdog –")
+            # a person reads the table first: the row shows its verdict badge (or none). The
+            # audit reads in a tenth of the line's time, so a loaded machine may take seconds
+            await expect(row.get_by_test_id("watchdog")).not_to_have_text(
+                "watchdog –", timeout=20000
+            )
             await press(page, row.get_by_test_id("open"))
             view = page.get_by_test_id("dv-watchdog")
             await expect(view).to_contain_text(text, timeout=20000)
