@@ -73,7 +73,10 @@ async def _serve_sim(spec: dict[str, Any]) -> None:
     )
     line = build_line(
         LineSettings(name="bench", baudrate=BAUD, faults=faults),
-        [(a, DriveSettings(response_delay_s=DELAY_S)) for a in range(1, spec["drives"] + 1)],
+        [
+            (a, DriveSettings(response_delay_s=DELAY_S))
+            for a in spec.get("addresses") or range(1, spec["drives"] + 1)
+        ],
         clock=clock,
     )
     loop = asyncio.get_running_loop()

@@ -5,8 +5,9 @@ Run: ``python benchmarks/startup_absent.py [--seconds S] [--output PATH] [--labe
 medians are reported, as the machine may be shared). The real BusMaster and SerialTransport against
 the timed simulator in its own process (``bus_faults.py``'s), on a pty at 115200 baud 8E1,
 drives answering after 5 ms. 126 drives are configured, every one ``control: bus`` with
-``on_start: adopt``; only addresses 1–16 are present. Measured from the moment the master
-starts, as after a gateway restart:
+``on_start: adopt``; 16 are present: addresses 1–16, or (the ``spread`` cases) 1 and
+112–126, behind 110 absent ones. Measured from the moment the master starts, as after a
+gateway restart:
 
 * **rate**: the present drives' answered polls per second in the windows 3–20 s and
   20–40 s, as a ratio to the same drives' rate with only them configured (all alive);
@@ -16,9 +17,11 @@ starts, as after a gateway restart:
   request to it whose control word is marked valid (FC bit 10), so the drive's own
   control-word timeout is fed again — taken from the bytes written to the port.
 
-Three cases: all alive (16 configured); 126 configured with a user's ``timeout_s: 0.1`` and
-``retries: 1``; 126 configured with the default timeouts. Timings come from
-``time.monotonic``.
+Five cases: all alive (16 configured); 126 configured with a user's ``timeout_s: 0.1`` and
+``retries: 1``; 126 configured with the default timeouts; and the spread layout with the
+user's timeouts, at a first start (nothing known) and at a restart, where the record of the
+drives answering when the daemon last ran (``fcmaster.presence``) names the 16 present ones.
+Timings come from ``time.monotonic``.
 """
 
 from __future__ import annotations
@@ -74,8 +77,15 @@ def window_name(window: tuple[float, float]) -> str:
     return f"{window[0]:g}-{window[1]:g}s"
 
 
-async def run_case(link: str, configured: int, seconds: float, **timing: Any) -> dict[str, Any]:
-    """Start a master on ``link`` with ``configured`` drives; what the present ones got."""
+async def run_case(
+    link: str,
+    configured: int,
+    seconds: float,
+    present: tuple[int, ...],
+    answered_before: frozenset[int],
+    **timing: Any,
+) -> dict[str, Any]:
+    """Start a master on ``link`` with ``configured`` drives; what the ``present`` ones got."""
     plan = LinePlan(
         name="bench",
         port=link,
@@ -89,13 +99,17 @@ async def run_case(link: str, configured: int, seconds: float, **timing: Any) ->
     replies = Replies()
     transport = WrittenTransport(link, baudrate=BAUD, parity=plan.parity)
     master = BusMaster(
-        plan, codec=FcCodec(), transport=transport, clock=MonotonicClock(), observer=replies
+        plan,
+        codec=FcCodec(),
+        transport=transport,
+        clock=MonotonicClock(),
+        observer=replies,
+        answered_before=answered_before,
     )
     start = time.monotonic()
     async with master:
         await asyncio.sleep(seconds - (time.monotonic() - start))
     end = start + seconds
-    present = range(1, PRESENT + 1)
     valid: dict[int, float] = {}
     for at, data in transport.written:
         telegram = decode_telegram(data, from_drive=False)
@@ -103,7 +117,7 @@ async def run_case(link: str, configured: int, seconds: float, **timing: Any) ->
             valid[telegram.address] = at - start
     absent_s = dict.fromkeys(WINDOWS, 0.0)  # line time taken by requests to absent drives
     for (at, data), (after, _) in itertools.pairwise(transport.written):
-        if decode_telegram(data, from_drive=False).address > PRESENT:
+        if decode_telegram(data, from_drive=False).address not in present:
             for low, high in WINDOWS:
                 if low <= at - start < high:
                     absent_s[(low, high)] += after - at
@@ -130,10 +144,16 @@ async def run_case(link: str, configured: int, seconds: float, **timing: Any) ->
     }
 
 
-CASES = (
-    ("all_alive", PRESENT, {"timeout_s": 0.1, "retries": 1}),
-    ("absent_user_timeouts", CONFIGURED, {"timeout_s": 0.1, "retries": 1}),
-    ("absent_default_timeouts", CONFIGURED, {}),
+LOW = tuple(range(1, PRESENT + 1))
+SPREAD = (1, *range(CONFIGURED - PRESENT + 2, CONFIGURED + 1))  # 1 and 112-126
+USER = {"timeout_s": 0.1, "retries": 1}
+# name, drives configured, drives present, what the record says answered before, timeouts
+CASES: tuple[tuple[str, int, tuple[int, ...], frozenset[int], dict[str, Any]], ...] = (
+    ("all_alive", PRESENT, LOW, frozenset(), USER),
+    ("absent_user_timeouts", CONFIGURED, LOW, frozenset(), USER),
+    ("absent_default_timeouts", CONFIGURED, LOW, frozenset(), {}),
+    ("spread_first_start", CONFIGURED, SPREAD, frozenset(), USER),
+    ("spread_restart", CONFIGURED, SPREAD, frozenset(SPREAD), USER),
 )
 
 
@@ -143,14 +163,15 @@ async def measure(seconds: float, repeat: int) -> dict[str, Any]:
     Each run's rate is compared with the all-alive run of the same round.
     """
     link = os.path.join(tempfile.mkdtemp(prefix="fcm-startup-"), "tty")
-    runs: dict[str, list[dict[str, Any]]] = {name: [] for name, _, _ in CASES}
+    runs: dict[str, list[dict[str, Any]]] = {name: [] for name, *_ in CASES}
     for _ in range(repeat):
-        for name, configured, timing in CASES:
-            with simulator(link=link, drives=PRESENT):
-                runs[name].append(await run_case(link, configured, seconds, **timing))
+        for name, configured, present, before, timing in CASES:
+            with simulator(link=link, drives=PRESENT, addresses=present):
+                run = await run_case(link, configured, seconds, present, before, **timing)
+                runs[name].append(run)
         alive = runs["all_alive"][-1]["replies_per_drive"]
         poll_interval_s = (WINDOWS[1][1] - WINDOWS[1][0]) / alive[window_name(WINDOWS[1])]
-        for name, _, _ in CASES:
+        for name, *_ in CASES:
             run = runs[name][-1]
             run["rate_vs_all_alive"] = {w: run["replies_per_drive"][w] / alive[w] for w in alive}
             run["gap_target_s"] = max(0.5, 3 * poll_interval_s)

@@ -139,7 +139,7 @@ class BusFields(_Model):
     offline_after: int = Field(default=3, ge=1)
     probe_interval_s: float = Field(default=5.0, gt=0)
     # the most of the line's time probes of absent drives may take while others answer
-    probe_share: float = Field(default=0.1, gt=0, le=0.5)
+    probe_share: float = Field(default=0.08, gt=0, le=0.5)
     echo: bool = False
     rs485: bool = False
     simulation: dict[str, Any] | None = None  # sim:// ports: what the simulated drives do

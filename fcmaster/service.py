@@ -58,6 +58,7 @@ from fcmaster.config import Config
 from fcmaster.errors import ConfigError
 from fcmaster.hub import Hub
 from fcmaster.journal import Journal
+from fcmaster.presence import PresenceRecord, presence_path
 from fcmaster.process_limits import RepeatedErrors, fit_file_limit
 from fcmaster.reload import Reloader
 from fcmaster.state import FleetState
@@ -69,6 +70,7 @@ from fcmaster.transport.serial import SerialTransport
 log = structlog.get_logger("fcmaster.service")
 
 STATS_INTERVAL_S = 5.0
+PRESENCE_S = 1.0  # how often the drives answering are noted (written only when they change)
 JOURNAL_MEMORY_MB = 16.0  # a file without a journal section: kept in memory, this big at most
 SHUTDOWN_STOP_TIMEOUT_S = 5.0  # the least a shutdown waits for stops and commands to end
 SHUTDOWN_ACTOR = "shutdown"
@@ -128,6 +130,8 @@ class Service:
             self.hub,
             wall=self.clock.wall,
         )
+        # The drives answering when the daemon last ran: polled at once when their line opens.
+        self.presence = PresenceRecord(presence_path(config.journal))
         self._transport_factory = transport_factory or self._default_transport
         self.masters: dict[str, BusMaster] = {}
         self._audits: list[WatchdogAudit] = []  # one per line
@@ -302,11 +306,14 @@ class Service:
                 notify_systemd("READY=1")
                 self.reloader.ready()
                 stats = asyncio.create_task(self._publish_stats(), name="service.stats")
+                presence = asyncio.create_task(self._keep_presence(), name="service.presence")
                 try:
                     await self._stopping.wait()
                 finally:
                     stats.cancel()
+                    presence.cancel()
                     await self.reloader.aclose()
+                await self._note_presence()  # before the shutdown closes the ports
                 log.info("service.stopping", on_shutdown=self.config.model.on_shutdown)
                 self.journal.note("stop", on_shutdown=self.config.model.on_shutdown)
                 notify_systemd("STOPPING=1")
@@ -351,6 +358,7 @@ class Service:
             transport=self._transport_factory(plan),
             clock=self.clock,
             observer=audit.observing(self.fleet),
+            answered_before=self.presence.answered_before(plan),
         )
         audit.attach(master.execute, master.stats)
         self._audits.append(audit)
@@ -501,6 +509,16 @@ class Service:
             ended.cancel()
         if not self._no_commands.is_set():
             log.warning("service.shutdown_commands_timed_out", running=self._running_commands)
+
+    async def _keep_presence(self) -> None:
+        while True:
+            await self.clock.sleep(PRESENCE_S)
+            await self._note_presence()
+
+    async def _note_presence(self) -> None:
+        for name, master in self.masters.items():
+            self.presence.update(name, master.is_up, master.planner.slots)
+        await self.presence.save()
 
     async def _publish_stats(self) -> None:
         while True:

@@ -81,10 +81,12 @@ class BusMaster:
         clock: Clock,
         observer: BusObserver | None = None,
         rng: random.Random | None = None,
+        answered_before: frozenset[int] = frozenset(),
     ) -> None:
+        """``answered_before``: the addresses that answered when the daemon last ran."""
         self.plan = plan
         self.codec = codec
-        self.planner = Planner(plan, codec)
+        self.planner = Planner(plan, codec, answered_before=answered_before)
         self.stats = LineStats(drives={d.name: DriveStats() for d in plan.drives})
         self._transport = transport
         self._clock = clock

@@ -69,7 +69,7 @@ class LinePlan:
     response_delay_s: float = 0.010  # the slowest drive's answer delay (FC 8-35)
     offline_after: int = 3  # consecutive failures that demote a drive
     probe_interval_s: float = 5.0  # how often a demoted drive is probed (at most)
-    probe_share: float = 0.1  # the most of the line's time probes may take while drives answer
+    probe_share: float = 0.08  # the most of the line's time probes may take while drives answer
     echo: bool = False  # the adapter hears its own transmission
     rs485: bool = False  # kernel RS-485 mode (RTS drives the transmitter)
     # More protocols' own line keys, named as in the config; their specs say what they mean.

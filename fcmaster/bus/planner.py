@@ -109,13 +109,15 @@ __all__ = [
 class Planner:
     """The scheduler of one line. Synchronous, deterministic, clock-free."""
 
-    def __init__(self, plan: LinePlan, codec: DriveCodec) -> None:
+    def __init__(
+        self, plan: LinePlan, codec: DriveCodec, *, answered_before: frozenset[int] = frozenset()
+    ) -> None:
         self.plan = plan
         self.codec = codec
         self._queue = CommandQueue()
         self.slots: list[DriveSlot] = [self._new_slot(drive) for drive in plan.drives]
         self._by_name: dict[str, DriveSlot] = {slot.name: slot for slot in self.slots}
-        self.rotation = Rotation(plan, self.slots)
+        self.rotation = Rotation(plan, self.slots, answered_before=answered_before)
         self._in_flight: Pending | None = None  # the command whose step is on the wire
         self._confirming = Confirmations()  # acknowledged, waiting for the status to show it
         self._hearing = Hearing(codec, self.rotation, self._confirming)

@@ -5,17 +5,20 @@ line opened (at start, or one that was not answering when the port was lost) is 
 as if it were there: it gets one attempt, its ordinary poll sent in the probes' share of the
 line, so the drives that answer keep their poll rate while the absent ones are tried one by
 one, and if it does not answer it is demoted at once. ``offline_after`` counts the misses of
-drives that answered before (since the line opened, or before the port was lost): one lost
-reply does not give up a drive that was there. While nothing on the line has answered yet,
-the drives not heard from are tried in turn, each up to ``offline_after`` times, as there is
-nothing better to do. A demoted drive is only probed. Probes are held to a budget: they take
-at most ``probe_share`` of the line's time while there are drives to poll, one at a time,
-the longest-waiting first, so many absent drives never fall due together and starve the
-present ones. Each absent drive still gets its probe, at the latest after every other absent
-drive has had one (:func:`probe_period_s`). With nothing to poll (every drive absent) the
-budget does not apply: the line has nothing better to do. Only unanswered probes count
-against the budget: an answered one served a drive that is there, so at start the present
-drives are found one after the other at once.
+drives that answered before: since the line opened, before the port was lost, or when the
+daemon last ran (``answered_before``, the record kept across restarts, so that a restart
+with part of the plant unpowered polls the drives that were answering at once, wherever
+their addresses sit among the absent ones). One lost reply does not give up a drive that was
+there. While nothing on the line has answered yet, the drives not heard from are tried in
+turn, each up to ``offline_after`` times, as there is nothing better to do. A demoted drive
+is only probed. Probes are held to a budget: they take at most ``probe_share`` of the line's
+time while there are drives to poll, one at a time, the longest-waiting first, so many
+absent drives never fall due together and starve the present ones. Each absent drive still
+gets its probe, at the latest after every other absent drive has had one
+(:func:`probe_period_s`). With nothing to poll (every drive absent) the budget does not
+apply: the line has nothing better to do. Only unanswered probes count against the budget:
+an answered one served a drive that is there, so at start the present drives are found one
+after the other at once.
 
 When every drive that was answering falls silent together, it is the line (a cable, the
 adapter, the power) rather than the drives: they are reported offline but probed one after
@@ -55,21 +58,36 @@ def probe_period_s(plan: LinePlan, absent: int, probe_s: float) -> float:
 class Rotation:
     """Poll rotation, demotion, the probe budget and line silence for one line's drives."""
 
-    def __init__(self, plan: LinePlan, slots: list[DriveSlot]) -> None:
+    def __init__(
+        self,
+        plan: LinePlan,
+        slots: list[DriveSlot],
+        *,
+        answered_before: frozenset[int] = frozenset(),
+    ) -> None:
+        """Rotation over ``slots``.
+
+        ``answered_before``: the addresses answering when the daemon last ran, polled as
+        present from the start (see the module docstring).
+        """
         self.plan = plan
         self.slots = slots
         self._index = {id(slot): i for i, slot in enumerate(slots)}
         self._next_poll = 0
         self._demoted: list[DriveSlot] = []
+        before = {id(s) for s in slots if s.address in answered_before}
         # Not answered since the line opened, not demoted: tried in this order, as probes are.
-        self._untried: dict[int, DriveSlot] = {id(s): s for s in slots if s.online is None}
+        self._untried: dict[int, DriveSlot] = {
+            id(s): s for s in slots if s.online is None and id(s) not in before
+        }
         self._heard = False  # some drive answered since the line opened
         self._quick = 0  # demoted drives with quick_probe set
         self._probe_ready_at = -math.inf  # no budgeted probe before this
         self._probe_started = 0.0
         self._probe_budgeted = False
         self._streak: set[int] = set()  # drives (by id) that failed since the line last answered
-        self._answered_before_down: set[int] = set()  # answering when the port was lost
+        # Answering when the port was lost, or when the daemon last ran.
+        self._answered_before_down: set[int] = before
         self.silent = False  # the whole line fell silent
 
     def reconfigure(self, plan: LinePlan, slots: list[DriveSlot]) -> None:

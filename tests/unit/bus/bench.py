@@ -119,9 +119,13 @@ def bench(
     responder: Responder | None = None,
     seed: int = 1,
     recorder: type[Recorder] = Recorder,
+    answered_before: frozenset[int] = frozenset(),
     **options: Any,
 ) -> Bench:
-    """A line named ``line1`` with ``drives``; each answered by an FcDrive unless ``fc`` says."""
+    """A line named ``line1`` with ``drives``; each answered by an FcDrive unless ``fc`` says.
+
+    ``answered_before``: the addresses the master is told answered when the daemon last ran.
+    """
     plan = dataclasses.replace(LinePlan(name="line1", port="scripted", drives=drives), **options)
     clock = VirtualClock(T0)
     fc_drives = list(fc) if fc is not None else [FcDrive(d.address) for d in drives]
@@ -134,6 +138,7 @@ def bench(
         clock=clock,
         observer=observer,
         rng=random.Random(seed),
+        answered_before=answered_before,
     )
     return Bench(clock, transport, master, observer, {d.address: d for d in fc_drives})
 

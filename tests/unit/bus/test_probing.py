@@ -56,7 +56,7 @@ def probe_cost(b: Bench) -> float:
 
 
 async def test_absent_drives_are_probed_within_their_share_and_live_ones_keep_their_rate() -> None:
-    b = fleet(126, PRESENT)
+    b = fleet(126, PRESENT, probe_share=0.1)
     async with b.master:
         await b.clock.run_until(T0 + 60.0)  # every absent drive demoted by now
         assert all(s.online is (s.address <= PRESENT) for s in b.master.planner.slots)
@@ -134,7 +134,7 @@ async def test_one_absent_drive_among_answering_ones_is_no_line_fault() -> None:
 
 def test_the_check_reports_the_longest_wait_for_a_probe_growing_with_the_absent() -> None:
     drives = tuple(DrivePlan(name=f"d{a}", address=a) for a in range(1, 127))
-    plan = LinePlan(name="line1", port="x", drives=drives, baudrate=115200)
+    plan = LinePlan(name="line1", port="x", drives=drives, baudrate=115200, probe_share=0.1)
     # An FC probe is 8 bytes each way; unanswered it costs its deadline and the drain.
     char_s = 11 / 115200
     cost = 16 * char_s + 0.010 + 0.050 + 8 * char_s + max(3.5 * char_s, 0.002)
@@ -253,3 +253,72 @@ async def test_after_a_reopen_the_drives_not_heard_yet_still_wait_for_the_probes
         times = [back, *polled[address], T0 + 25.0]
         longest = max(after - before for before, after in itertools.pairwise(times))
         assert longest <= bound, (address, longest)
+
+
+# A restart with the low addresses unpowered: the drives that answer sit behind 109 absent ones.
+AFTER_ABSENT = frozenset({1, *range(111, 127)})
+
+
+def spread_fleet(present: frozenset[int], **options: Any) -> Bench:
+    drives = [DrivePlan(name=f"d{a}", address=a) for a in range(1, 127)]
+    fc = [FcDrive(a, silent=a not in present) for a in range(1, 127)]
+    return bench(*drives, fc=fc, probe_interval_s=5.0, **options)
+
+
+async def test_without_a_record_the_drives_behind_the_absent_ones_wait_for_their_one_attempt() -> (
+    None
+):
+    """Why the record exists: untried drives are tried in the probes' share, in line order."""
+    options = {"baudrate": 115200, "timeout_s": 0.1, "retries": 1}
+    b = spread_fleet(AFTER_ABSENT, **options)
+    async with b.master:
+        await b.clock.run_until(T0 + 60.0)
+    polled = answered_polls(b, T0, T0 + 60.0)
+    assert set(polled) == {1}  # a minute on, 111–126 have not had a poll answered
+
+
+async def test_a_restart_polls_at_once_the_drives_that_answered_before_wherever_they_sit() -> None:
+    """The record of the last run: 111–126 polled as present from the start, absent ones tried.
+
+    From the start, every drive that answered before keeps its all-alive rate and none goes
+    longer than max(0.5 s, 3 poll intervals) without an answer, while the absent drives still
+    get their one attempt each in the probes' share.
+    """
+    options: dict[str, Any] = {"baudrate": 115200, "timeout_s": 0.1, "retries": 1}
+    span = 20.0
+    alone = bench(*[DrivePlan(name=f"d{a}", address=a) for a in sorted(AFTER_ABSENT)], **options)
+    async with alone.master:
+        await alone.clock.run_until(T0 + span)
+    full = answered_polls(alone, T0, T0 + span)
+    period = span * len(AFTER_ABSENT) / sum(len(t) for t in full.values())
+    bound = max(0.5, 3 * period)
+    b = spread_fleet(AFTER_ABSENT, answered_before=AFTER_ABSENT, **options)
+    async with b.master:
+        await b.clock.run_until(T0 + span)
+    polled = answered_polls(b, T0, T0 + span)
+    assert set(polled) == set(AFTER_ABSENT)
+    for address in AFTER_ABSENT:
+        times = [T0, *polled[address], T0 + span]
+        longest = max(after - before for before, after in itertools.pairwise(times))
+        assert longest <= bound, (address, longest, bound)
+    # From the 3rd second, as at any start: at least 0.9 of the all-alive rate.
+    late, alive = answered_polls(b, T0 + 3.0, T0 + span), answered_polls(alone, T0 + 3.0, T0 + span)
+    assert sum(map(len, late.values())) >= 0.9 * sum(map(len, alive.values()))
+    tried = [t.address for _, t in b.requests() if t.address not in AFTER_ABSENT]
+    assert tried[:15] == list(range(2, 17))  # the absent ones, one attempt each, in order
+    assert len(tried) == len(set(tried))
+
+
+async def test_a_drive_that_answered_before_and_is_gone_now_is_given_up_after_its_misses() -> None:
+    """The record is a guess: a drive it names that no longer answers is demoted as any other."""
+    options = {"baudrate": 115200, "timeout_s": 0.1, "retries": 1}
+    gone = 111
+    b = spread_fleet(AFTER_ABSENT - {gone}, answered_before=AFTER_ABSENT, **options)
+    async with b.master:
+        await b.clock.run_until(T0 + 5.0)
+        slot = next(s for s in b.master.planner.slots if s.address == gone)
+        assert slot.online is False
+    asked = [at for at, t in b.requests() if t.address == gone]
+    assert len(asked) == b.plan.offline_after  # polled as present until its misses, then demoted
+    polled = answered_polls(b, T0, T0 + 5.0)
+    assert set(polled) == AFTER_ABSENT - {gone}
