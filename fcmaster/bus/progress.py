@@ -30,7 +30,7 @@ from fcmaster.bus.intents import (
     unknown,
     without_reset,
 )
-from fcmaster.bus.queue import CommandQueue
+from fcmaster.bus.queue import MOTION_ACTIONS, CommandQueue, superseded
 from fcmaster.bus.steps import (
     DriveSlot,
     Pending,
@@ -80,8 +80,9 @@ class Progress:
             exchange = exchanges[pending.part]
         else:
             assert slot is not None  # access commands always name a drive
-            if not pending.access:
-                pending.access = admission.build_access(codec, slot, command)
+            # Built again for each exchange: every telegram carries the drive's control word
+            # as it is now, and one built before a stop was sent must not undo it.
+            pending.access = admission.build_access(codec, slot, command)
             exchange = pending.access[pending.part]
         return Step(StepKind.COMMAND, exchange, slot, pending)
 
@@ -89,16 +90,22 @@ class Progress:
         """No valid reply to ``pending``'s exchange; whether that ended it.
 
         It is retried (it stays at the head of its queue) up to ``retries`` times; then it
-        ends ``timeout``.
+        ends ``timeout``. A motion command for a drive whose stop is queued ends at once,
+        ``superseded``: the stop came in while it was on the wire.
         """
         pending.attempts += 1
         if pending.access:
             pending.part = 0  # again from the start: what a first exchange selected may be gone
-        if pending.attempts <= retries:
+        action = pending.command.action
+        stop = self._queue.stop_for(pending.slot) if action in MOTION_ACTIONS else None
+        if pending.attempts <= retries and stop is None:
             return False
         sent = pending.phase is Phase.SENDING
-        self.finish(pending, report, result_of(Outcome.TIMEOUT, reason))
-        action = pending.command.action
+        if stop is not None:
+            # A stop came in while this was on the wire: retried, it would follow the stop.
+            self.finish(pending, report, superseded(pending, stop))
+        else:
+            self.finish(pending, report, result_of(Outcome.TIMEOUT, reason))
         if sent and action.is_control and not action.is_urgent:
             # The drive may or may not have applied it: adopt it again from its next good
             # status. A stop that timed out is kept (it holds from being sent).

@@ -3,8 +3,9 @@
 Urgent commands (stop, coast, quick stop) go before all others, oldest first; the rest in
 arrival order. A command for a restarting drive waits without holding up the others. A
 stop supersedes the queued motion commands of its drive (they end ``superseded``, naming
-the stop), including one whose attempt got no answer and waits for its retry: a retried
-start must never follow a stop (start, stop, start on the wire). A newer reference takes
+the stop), including one whose attempt got no answer and waits for its retry, and the one
+on the wire when its attempt then fails (see :meth:`CommandQueue.stop_for`): a retried start
+must never follow a stop (start, stop, start on the wire). A newer reference takes
 the place of a queued one that has not gone out (the older ends ``superseded``, naming the
 newer). Neither touches the command in flight: the drive may already be acting on it, and
 its reply must still find it queued.
@@ -15,7 +16,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Iterable
 
-from fcmaster.bus.commands import Action, Command, Outcome, describe
+from fcmaster.bus.commands import Action, Command, CommandResult, Outcome, describe
 from fcmaster.bus.steps import Completion, DriveSlot, Pending, Phase, completion_of, result_of
 
 MOTION_ACTIONS = frozenset(
@@ -117,14 +118,18 @@ class CommandQueue:
                 and (slot is None or pending.slot is slot or pending.slot is None)
             ):
                 pending.phase = Phase.ENDED
-                reason = f"superseded by {describe(command)}"
-                if pending.attempts or pending.part:
-                    reason += " (part of it went out unanswered: the drive may have seen it)"
-                ended.append(completion_of(pending, result_of(Outcome.SUPERSEDED, reason)))
+                ended.append(completion_of(pending, superseded(pending, command)))
             else:
                 keep.append(pending)
         self._normal = keep
         return ended
+
+    def stop_for(self, slot: DriveSlot | None) -> Command | None:
+        """The oldest stop (any urgent command) queued for ``slot``'s drive or for all."""
+        for pending in self._urgent:
+            if slot is None or pending.slot is slot or pending.slot is None:
+                return pending.command
+        return None
 
     def _coalesce(self, pending: Pending, in_flight: Pending | None) -> Completion | None:
         """Put ``pending`` in the place of a queued reference; that one ends superseded.
@@ -150,3 +155,11 @@ class CommandQueue:
                 return replaced
             return None
         return None
+
+
+def superseded(pending: Pending, stop: Command) -> CommandResult:
+    """How a motion command ``stop`` made moot ends, saying whether the drive may have seen it."""
+    reason = f"superseded by {describe(stop)}"
+    if pending.attempts or pending.part:
+        reason += " (part of it went out unanswered: the drive may have seen it)"
+    return result_of(Outcome.SUPERSEDED, reason)

@@ -95,7 +95,7 @@ class Pending:
     attempts: int = 0  # failed attempts at the exchange (or access sequence) under way
     part: int = 0  # which of the command's exchanges is next
     intent: ControlIntent | None = None  # the intent this command sends, once built
-    access: tuple[Exchange, ...] = ()  # a read's or write's exchanges, once built
+    access: tuple[Exchange, ...] = ()  # a read's or write's exchanges, as last built
     learned: int = 0  # state-learning polls answered before a relative command
     confirm_by: float = 0.0  # CONFIRMING: the status must show the result by then
     confirm_s: float = 0.0  # CONFIRMING: the time it was given

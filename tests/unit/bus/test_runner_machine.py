@@ -19,12 +19,19 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import os
 from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
-from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
+from hypothesis.stateful import (
+    RuleBasedStateMachine,
+    initialize,
+    invariant,
+    precondition,
+    rule,
+)
 
 from fcmaster.bus.commands import CommandResult, Outcome
 from fcmaster.bus.plan import DrivePlan
@@ -58,12 +65,12 @@ def _runs(word: int) -> bool:
 class LineMachine(RuleBasedStateMachine):
     """A BusMaster on a scripted line of two bus drives and one monitored drive."""
 
+    b: Bench
+
     def __init__(self) -> None:
         super().__init__()
         self.loop = asyncio.new_event_loop()
         asyncio.set_event_loop(self.loop)  # the callers' tasks are made outside a running loop
-        self.b: Bench = bench(A, B, M, offline_after=2, probe_interval_s=0.5)
-        self.loop.run_until_complete(self.b.master.__aenter__())
         # (drive, action, submitted at, wire index when submitted, the caller's task)
         self.commands: list[tuple[str, str, float, int, asyncio.Task[CommandResult]]] = []
         self.shutdown_stops: dict[str, asyncio.Task[CommandResult]] = {}
@@ -71,10 +78,22 @@ class LineMachine(RuleBasedStateMachine):
         self.shut_at: int | None = None  # the wire's length when the shutdown began
         self.unpowered: set[int] = set()  # drives silent at some time since the shutdown
 
+    @initialize(answered_before=st.frozensets(st.sampled_from([1, 2, 3])))
+    def open_line(self, answered_before: frozenset[int]) -> None:
+        """The line opens; the record says which drives answered when the daemon last ran."""
+        self.b = bench(
+            A, B, M, offline_after=2, probe_interval_s=0.5, answered_before=answered_before
+        )
+        self._run(self.b.master.__aenter__())
+
     def _run(self, coroutine: Any) -> Any:
         return self.loop.run_until_complete(coroutine)
 
     def teardown(self) -> None:
+        if not hasattr(self, "b"):  # it failed before the line opened
+            self.loop.close()
+            asyncio.set_event_loop(None)
+            return
         try:
             if self.shut_at is None:
                 self.shutdown()
@@ -196,7 +215,7 @@ class LineMachine(RuleBasedStateMachine):
 
 TestLineMachine = LineMachine.TestCase
 TestLineMachine.settings = settings(
-    max_examples=40,
+    max_examples=int(os.environ.get("FCM_MACHINE_EXAMPLES", "40")),
     stateful_step_count=20,
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow],
@@ -207,6 +226,7 @@ def test_the_wire_check_catches_a_run_after_a_stop() -> None:
     # The checks themselves can fail: a master that runs a drive again after its stop, with
     # no start since (forced here by overwriting the drive's commanded intent).
     machine = LineMachine()
+    machine.open_line(frozenset())
     try:
         machine.command("a", "start")
         machine.time_passes(0.3)
@@ -221,6 +241,39 @@ def test_the_wire_check_catches_a_run_after_a_stop() -> None:
     finally:
         machine.shutdown()
         machine._run(machine.b.clock.run_for(1.0))
+        machine._run(machine.b.master.close())
+        machine.loop.close()
+        asyncio.set_event_loop(None)
+
+
+@pytest.mark.parametrize(
+    ("action", "outcome"), [("set_reference", Outcome.SUPERSEDED), ("read", Outcome.TIMEOUT)]
+)
+def test_a_command_on_the_wire_when_the_stop_comes_never_runs_the_drive_again(
+    action: str, outcome: Outcome
+) -> None:
+    # Found by the machine: a command on the wire to a drive that just lost power, the
+    # shutdown's stop queued meanwhile. The command's attempt fails; retried as it was
+    # built, it would have run the drive again after the stop (run, stop, stop, run): a
+    # reference change ends superseded instead, and a read's retry carries the stop.
+    machine = LineMachine()
+    machine.open_line(frozenset())
+    try:
+        machine.command("b", "start")
+        machine.time_passes(0.25)
+        machine.command("b", action)
+        machine.power(2, True)
+        machine.time_passes(0.0625)
+        machine.shutdown()
+        machine._run(machine.b.clock.run_for(1.0))
+        machine._check_wire()
+        task = next(t for _, a, *_, t in machine.commands if a == action)
+        assert task.result().outcome is outcome
+        if outcome is Outcome.SUPERSEDED:
+            assert task.result().reason == (
+                "superseded by stop (part of it went out unanswered: the drive may have seen it)"
+            )
+    finally:
         machine._run(machine.b.master.close())
         machine.loop.close()
         asyncio.set_event_loop(None)
