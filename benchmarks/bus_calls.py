@@ -34,7 +34,7 @@ async def profile(case: harness.Case, path: str, seconds: float) -> tuple[pstats
     transport = SerialTransport(path, baudrate=plan.baudrate, parity=plan.parity)
     profiler = cProfile.Profile()
     async with BusMaster(plan, codec=FcCodec(), transport=transport, clock=clock) as master:
-        await asyncio.sleep(harness.WARMUP_S)
+        await harness.warmed_up(master)
         first = master.stats.replies
         profiler.enable()
         await asyncio.sleep(seconds)  # one wake-up of its own, not one per poll

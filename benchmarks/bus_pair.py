@@ -31,8 +31,10 @@ each reply's last byte was due). Against it, in turn, round after round:
   cancelled for each request. No planner, no accounting, no reporting: what fcmaster costs
   beyond it is the price of its layers.
 
-Figures, each over the run's window after a 0.5 s warm-up, all but CPU measured by the
-peer (the simulator), the same way for every master:
+Figures, each over the run's window after a 0.5 s warm-up (fcmaster's: also until it has
+had as many replies as the line has idle polls, see ``bus.warmed_up``, since its caches of
+encoded polls and parsed replies fill once, at start), all but CPU measured by the peer
+(the simulator), the same way for every master:
 
 * **CPU s/1000**: ``time.process_time()`` of this process per 1000 replies (the simulator
   is another process);
@@ -89,7 +91,7 @@ async def run_fcmaster(case: harness.Case, path: str, duration_s: float) -> dict
     async with BusMaster(plan, codec=FcCodec(), transport=transport, clock=MonotonicClock()) as m:
         if not m.is_up:
             raise RuntimeError(f"fcmaster could not open {path}")
-        await asyncio.sleep(harness.WARMUP_S)
+        await harness.warmed_up(m)
         replies, timeouts = m.stats.replies, m.stats.timeouts
         cpu, start = time.process_time(), now()
         await asyncio.sleep(duration_s)

@@ -33,7 +33,11 @@ def provenance(benchmark: str) -> dict[str, Any]:
 
 
 def write(path: Path, results: dict[str, Any]) -> None:
-    """``results`` as indented strict JSON at ``path`` (NaN, a figure with no samples: null)."""
+    """``results`` as indented strict JSON at ``path``.
+
+    NaN (a figure with no samples) and infinity (a time that never came within the run)
+    are written as null.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(_finite(results), indent=2, allow_nan=False) + "\n")
 
@@ -62,7 +66,7 @@ def _git(*args: str) -> str:
 
 
 def _finite(value: Any) -> Any:
-    if isinstance(value, float) and math.isnan(value):
+    if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, dict):
         return {k: _finite(v) for k, v in value.items()}
