@@ -177,20 +177,13 @@ class BusMaster:
     async def execute(self, name: str | None, command: Command) -> CommandResult:
         """Carry out ``command`` on drive ``name`` (None: broadcast); one result, always."""
         future: asyncio.Future[CommandResult] = asyncio.get_running_loop().create_future()
-        if not self._up or self._closing:
-            self._report.resolve(
-                [
-                    Completion(
-                        (future,),
-                        command,
-                        name or "*",
-                        CommandResult(
-                            outcome=Outcome.CANCELLED,
-                            reason=f"{self.plan.name} is down: {self.stats.down_reason}",
-                        ),
-                    )
-                ]
-            )
+        # What the config forbids is refused as such even while the line is down.
+        refusal = self.planner.refusal(name, command)
+        if refusal is None and (not self._up or self._closing):
+            reason = f"{self.plan.name} is down: {self.stats.down_reason}"
+            refusal = CommandResult(outcome=Outcome.CANCELLED, reason=reason)
+        if refusal is not None:
+            self._report.resolve([Completion((future,), command, name or "*", refusal)])
         else:
             self._report.resolve(self.planner.submit(name, command, future))
             self._runner.wake()

@@ -52,14 +52,13 @@ last step :meth:`Planner.next_step` handed out and not yet reported back): the d
 already be acting on it, and its reply must still find it at the head of its queue.
 
 The planner puts together parts with an interface each: the message types
-(:mod:`~fcmaster.bus.steps`), admission (:mod:`~fcmaster.bus.admission`: what is refused
-before it is queued), queue discipline (:mod:`~fcmaster.bus.queue`), polls, probes and
-liveness (:mod:`~fcmaster.bus.rotation`), the control-intent algebra
-(:mod:`~fcmaster.bus.intents`), a command's way through its exchanges, one after the other
-(:mod:`~fcmaster.bus.progress`), what a reply says about its drive
-(:mod:`~fcmaster.bus.hearing`) and the commands waiting for confirmation
-(:mod:`~fcmaster.bus.unconfirmed`). What is left here is choosing the next step and what a
-failure means for its drive.
+(:mod:`~fcmaster.bus.steps`), admission (:mod:`~fcmaster.bus.admission`: what is refused before
+it is queued), queue discipline (:mod:`~fcmaster.bus.queue`), polls, probes and liveness
+(:mod:`~fcmaster.bus.rotation`), the control-intent algebra (:mod:`~fcmaster.bus.intents`), a
+command's way through its exchanges, one after the other (:mod:`~fcmaster.bus.progress`), what a
+reply says about its drive (:mod:`~fcmaster.bus.hearing`) and the commands waiting for
+confirmation (:mod:`~fcmaster.bus.unconfirmed`). What is left here is choosing the next step and
+what a failure means for its drive.
 """
 
 from __future__ import annotations
@@ -68,7 +67,7 @@ import dataclasses
 
 from fcmaster.bus import admission, pacing
 from fcmaster.bus.codecs import monitor_keys
-from fcmaster.bus.commands import Action, Command
+from fcmaster.bus.commands import Action, Command, CommandResult
 from fcmaster.bus.hearing import Hearing
 from fcmaster.bus.intents import (
     forget,
@@ -187,14 +186,18 @@ class Planner:
         Returns the commands this submission ended at once: this one when it cannot go on
         the wire (invalid, not allowed), or queued motion commands a stop supersedes.
         """
-        slot = None if name is None else self._by_name.get(name)
-        refusal = admission.refusal(self.codec, self.plan.name, self.slots, name, slot, command)
-        if refusal is not None:
+        if (refusal := self.refusal(name, command)) is not None:
             return [Completion((ticket,), command, name or "*", refusal)]
+        slot = None if name is None else self._by_name.get(name)
         # It may go before the step just peeked, or end or change the command that step
         # carries (a stop supersedes it, a newer reference takes its place): choose again.
         self._peeked = None
         return self._queue.add(Pending(command, slot, [ticket]), self._in_flight)
+
+    def refusal(self, name: str | None, command: Command) -> CommandResult | None:
+        """Why the config refuses ``command`` for drive ``name`` (None: it does not)."""
+        slot = None if name is None else self._by_name.get(name)
+        return admission.refusal(self.codec, self.plan.name, self.slots, name, slot, command)
 
     def cancel_all(self, reason: str) -> list[Completion]:
         """End every queued command as cancelled (shutdown, line lost)."""

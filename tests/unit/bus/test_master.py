@@ -934,3 +934,18 @@ async def test_a_start_applied_with_its_replies_lost_is_adopted_never_stopped() 
     assert {t.pcd2 for _, t in b.requests(1)[-3:]} == {encode_reference(50.0)}
     assert drive.running
     assert drive.output_pct == pytest.approx(50.0, abs=0.01)
+
+
+async def test_what_the_config_forbids_is_refused_as_such_while_the_line_is_down() -> None:
+    # A monitor-only drive's start is not allowed, up or down: "cancelled, the line is
+    # down" would say it might work once the line is back.
+    b = bench(A, M)
+    b.transport.fail_open = True
+    async with b.master:
+        assert not b.master.is_up
+        start = await b.complete(b.submit(orders(b.master, "m").start(frequency_hz=20.0)))
+        stop = await b.complete(b.submit(orders(b.master, "a").stop()))
+    assert start.outcome is Outcome.NOT_ALLOWED
+    assert start.reason == "m is monitor-only (not configured control: bus)"
+    assert stop.outcome is Outcome.CANCELLED
+    assert stop.reason == "line1 is down: scripted open failure"

@@ -2,7 +2,8 @@
 
 A hypothesis state machine drives a BusMaster on the scripted line — the runner, the link
 and the planner together, in callbacks as on a real port — with commands from several
-callers at any moment, drives losing power and coming back, trips, and a shutdown (the
+callers at any moment, drives losing power and coming back, trips, the adapter unplugged
+(the port reopened), and a shutdown (the
 queue cancelled, the stops submitted, as the service does at SIGTERM). After every step it
 checks what the wire and the callers saw:
 
@@ -20,6 +21,7 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import os
+import re
 from typing import Any
 
 import pytest
@@ -77,6 +79,7 @@ class LineMachine(RuleBasedStateMachine):
         self.ended: dict[int, float] = {}  # id of a command's task → when it ended
         self.shut_at: int | None = None  # the wire's length when the shutdown began
         self.unpowered: set[int] = set()  # drives silent at some time since the shutdown
+        self.unplugged = False  # the adapter went away at some time
 
     @initialize(answered_before=st.frozensets(st.sampled_from([1, 2, 3])))
     def open_line(self, answered_before: frozenset[int]) -> None:
@@ -101,8 +104,15 @@ class LineMachine(RuleBasedStateMachine):
             unended = [(name, action) for name, action, _, _, t in self.commands if not t.done()]
             assert not unended, f"commands without an outcome: {unended}"
             for name, task in self.shutdown_stops.items():
-                if (A.address if name == "a" else B.address) not in self.unpowered:
-                    assert task.result().outcome is Outcome.DONE, (name, task.result())
+                result = task.result()
+                if (A.address if name == "a" else B.address) in self.unpowered:
+                    continue
+                if self.unplugged and result.outcome is not Outcome.DONE:
+                    # The port was gone at the stop: it could not be sent, and says why.
+                    assert result.outcome is Outcome.CANCELLED, (name, result)
+                    assert re.search("lost its port|is down", result.reason), (name, result)
+                else:
+                    assert result.outcome is Outcome.DONE, (name, result)
             self._check_wire()
         finally:
             self._run(self.b.master.close())
@@ -138,6 +148,12 @@ class LineMachine(RuleBasedStateMachine):
         self.b.drives[address].silent = silent
         if silent and self.shut_at is not None:
             self.unpowered.add(address)
+
+    @rule()
+    def unplug(self) -> None:
+        """The adapter goes away; the master reopens the port when it can."""
+        self.b.transport.lost = True
+        self.unplugged = True
 
     @rule(address=st.sampled_from([1, 2]))
     def trip(self, address: int) -> None:
