@@ -36,6 +36,7 @@ import getpass
 import itertools
 import json
 import os
+import random
 import resource
 import shutil
 import signal
@@ -89,11 +90,28 @@ class Gateway:
         self.fleet.drive_replied("line1", plan, reply, self.clock.now(), None)
 
 
+def broker_port() -> int:
+    """A free loopback port below the ephemeral range.
+
+    Not one the kernel hands out: a client that keeps reconnecting to a port of that range
+    while nothing listens on it is, now and then, given that very port as its own and
+    connects to itself (TCP's simultaneous open), and then holds it: the broker cannot
+    listen there again (seen once in a 10-minute outage).
+    """
+    low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    for port in random.sample(range(max(1024, low - 12000), low), 200):
+        with socket.socket() as sock:
+            try:
+                sock.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError("no free port below the ephemeral range")
+
+
 def mosquitto_config(directory: Path) -> tuple[int, Path]:
     """A free loopback port and a mosquitto config in ``directory`` that listens on it."""
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
+    port = broker_port()
     config = directory / "mosquitto.conf"
     user = getpass.getuser()  # as root, mosquitto would become "mosquitto"
     config.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\nuser {user}\n")
