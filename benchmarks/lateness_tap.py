@@ -32,10 +32,20 @@ def load(path: Path) -> dict[str, list[tuple[float, float]]]:
 
 def p99(samples: list[tuple[float, float]], start: float, end: float) -> float | None:
     """The 99th percentile of the samples taken in ``[start, end)`` (None: there were none)."""
-    taken = sorted(s for t, s in samples if start <= t < end)
-    if not taken:
+    return quantile(taken(samples, start, end), 0.99)
+
+
+def taken(samples: list[tuple[float, float]], start: float, end: float) -> list[float]:
+    """The samples taken in ``[start, end)``, without their times."""
+    return [s for t, s in samples if start <= t < end]
+
+
+def quantile(values: list[float], q: float) -> float | None:
+    """The ``q`` quantile of ``values`` (None: there are none)."""
+    ordered = sorted(values)
+    if not ordered:
         return None
-    return taken[min(len(taken) - 1, int(0.99 * len(taken)))]
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 def main(out: Path, argv: list[str]) -> int:

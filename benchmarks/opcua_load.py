@@ -37,6 +37,7 @@ The machine's load average goes with the figures. Linux only (``/proc``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -45,6 +46,7 @@ import tempfile
 import threading
 import time
 import urllib.request
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Final
@@ -67,6 +69,16 @@ STATUS: Final = (
 
 
 def _config(lines: int, drives: int, http: int, opcua: int, folder: Path, baud: int) -> str:
+    return (
+        _buses(lines, drives, folder, baud)
+        + _http(http)
+        + f"opcua:\n  listen: 127.0.0.1:{opcua}\n  pki: {folder / 'pki'}\n"
+        + "logging: {level: info, format: json}\n"
+    )
+
+
+def _buses(lines: int, drives: int, folder: Path, baud: int) -> str:
+    """``buses:`` of simulated lines whose drives all run on a long ramp (see the docstring)."""
     running = ", ".join(
         f"{a}: {{running_hz: {5 + a % 10}, parameters: {{'3-41': {RAMP_S}}}}}"
         for a in range(1, drives + 1)
@@ -81,12 +93,15 @@ def _config(lines: int, drives: int, http: int, opcua: int, folder: Path, baud: 
             f"      - {{name: l{line}d{a}, address: {a}, control: bus}}\n"
             for a in range(1, drives + 1)
         )
-    return text + (
+    return text
+
+
+def _http(http: int) -> str:
+    """``http:`` on port ``http``, with a viewer's and an operator's token."""
+    return (
         f"http:\n  listen: 127.0.0.1:{http}\n  anonymous: viewer\n  tokens:\n"
         f"    - {{name: scada, role: viewer, token: {TOKEN}}}\n"
         f"    - {{name: ops, role: operator, token: {OPERATOR}}}\n"
-        f"opcua:\n  listen: 127.0.0.1:{opcua}\n  pki: {folder / 'pki'}\n"
-        "logging: {level: info, format: json}\n"
     )
 
 
@@ -180,14 +195,10 @@ def _p99(before: list[tuple[float, int]], after: list[tuple[float, int]]) -> flo
     return None
 
 
-def _window(
-    base: str, seconds: float, daemon_pid: int, server_pid: int, pause: threading.Event
-) -> dict[str, Any]:
-    before, t0 = _lines(base), time.monotonic()
-    cpu0, server_cpu0 = _cpu_s(daemon_pid), _cpu_s(server_pid)
-    pause.wait(seconds)
-    after, took = _lines(base), time.monotonic() - t0
-    cpu1, server_cpu1 = _cpu_s(daemon_pid), _cpu_s(server_pid)
+def line_figures(
+    before: dict[str, dict[str, Any]], after: dict[str, dict[str, Any]], took: float
+) -> dict[str, dict[str, Any]]:
+    """Each line's figures between two reads of ``_lines`` ``took`` seconds apart."""
     lines = {}
     for name, end in after.items():
         start = before[name]
@@ -200,10 +211,21 @@ def _window(
             "lateness_p99_s": _p99(start["buckets"], end["buckets"]),
             "lateness_mean_s": (end["sum"] - start["sum"]) / count if count else None,
         }
+    return lines
+
+
+def _window(
+    base: str, seconds: float, daemon_pid: int, server_pid: int, pause: threading.Event
+) -> dict[str, Any]:
+    before, t0 = _lines(base), time.monotonic()
+    cpu0, server_cpu0 = _cpu_s(daemon_pid), _cpu_s(server_pid)
+    pause.wait(seconds)
+    after, took = _lines(base), time.monotonic() - t0
+    cpu1, server_cpu1 = _cpu_s(daemon_pid), _cpu_s(server_pid)
     return {
         "seconds": took,
         "span": (t0, t0 + took),
-        "lines": lines,
+        "lines": line_figures(before, after, took),
         "daemon_cpu": (cpu1 - cpu0) / took,
         "server_cpu": (server_cpu1 - server_cpu0) / took,
         "server_rss_kib": _rss_kib(server_pid)[0],
@@ -255,6 +277,40 @@ def _loaded(
     return window
 
 
+@contextlib.contextmanager
+def plant(
+    config: Path, lines: int, base: str, pause: threading.Event
+) -> Iterator[subprocess.Popen[bytes]]:
+    """``fcmaster sim`` serving ``config``'s lines and ``fcmaster run`` polling them.
+
+    The daemon runs under ``lateness_tap.py`` (its samples in ``lateness.json`` beside
+    ``config``, its log in ``run.log``); yielded once every drive is online (``base``: its
+    HTTP API). Both are stopped at the end.
+    """
+    folder = config.parent
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "fcmaster", "sim", "--config", str(config)],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT,
+    )  # fmt: skip
+    assert sim.stdout is not None
+    for _ in range(lines):  # `BUS PATH` per line once its pty is linked
+        sim.stdout.readline()
+    with (folder / "run.log").open("wb") as stderr:
+        daemon = subprocess.Popen(
+            [sys.executable, str(Path(__file__).parent / "lateness_tap.py"),
+             str(folder / "lateness.json"), "run", "--config", str(config)],
+            stdout=subprocess.DEVNULL, stderr=stderr, cwd=ROOT,
+        )  # fmt: skip
+    try:
+        _wait_for_fleet(base, daemon, pause)
+        yield daemon
+    finally:
+        daemon.terminate()
+        daemon.wait(timeout=30)
+        sim.terminate()
+        sim.wait(timeout=30)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lines", type=int, default=1)
@@ -271,22 +327,8 @@ def main() -> None:
         config = folder / "plant.yaml"
         config.write_text(_config(args.lines, args.drives, http, opcua, folder, args.baudrate))
         log, samples = folder / "run.log", folder / "lateness.json"
-        sim = subprocess.Popen(
-            [sys.executable, "-m", "fcmaster", "sim", "--config", str(config)],
-            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT,
-        )  # fmt: skip
-        assert sim.stdout is not None
-        for _ in range(args.lines):  # `BUS PATH` per line once its pty is linked
-            sim.stdout.readline()
-        with log.open("wb") as stderr:
-            daemon = subprocess.Popen(
-                [sys.executable, str(Path(__file__).parent / "lateness_tap.py"), str(samples),
-                 "run", "--config", str(config)],
-                stdout=subprocess.DEVNULL, stderr=stderr, cwd=ROOT,
-            )  # fmt: skip
         base, url = f"http://127.0.0.1:{http}", f"opc.tcp://127.0.0.1:{opcua}/"
-        try:
-            _wait_for_fleet(base, daemon, pause)
+        with plant(config, args.lines, base, pause) as daemon:
             _trust_client(folder, url, folder / "pki")
             pids = (daemon.pid, _server_pid(log))
             _ramp_all(base)
@@ -298,11 +340,6 @@ def main() -> None:
                 loaded = _loaded(folder, url, base, args, pids, pause)
                 windows.append({"cycle": cycle, **loaded})
                 print(json.dumps(windows[-2:], default=str)[:600], flush=True)
-        finally:
-            daemon.terminate()
-            daemon.wait(timeout=30)
-            sim.terminate()
-            sim.wait(timeout=30)
         raw = lateness_tap.load(samples)
     for window in windows:  # each line's p99 of the window's own samples (lines unnamed)
         start, end = window.pop("span")

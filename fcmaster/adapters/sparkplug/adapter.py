@@ -23,8 +23,17 @@ the broker is known to have it) and :class:`~fcmaster.adapters.sparkplug.command
 * in a session, the **sender** publishes the queue in order (seq is given as a message is
   queued, so the queue's order is the wire's); the **barrier** task asks the broker for an
   UNSUBACK now and then and confirms to the store what was published before it; the
-  **drain** publishes stored history (``is_historical``) one message at a time, only when
-  the queue is empty, so live data never waits behind more than one such message.
+  **drain** publishes stored history (``is_historical``) oldest first, in messages of at
+  most :data:`HISTORY_MESSAGE_ROWS` changes, one at a time, and only while live data keeps
+  up (see :meth:`SparkplugAdapter._live_first`): live data never waits behind more than one
+  history message, and history slows down as soon as live data is late.
+
+Live data is late when the process has more to do than it can (history's reading, encoding
+and writing is work too, beside the bus and the other adapters): a live message waits in the
+queue, the hub holds snapshots the pump has not read, or a live message took longer than
+:data:`LIVE_LAG_S` from its queueing to its writing to the socket, or the drain's own sleep
+ended that much late (the loop was busy). The drain then waits and halves its pace; while
+live data keeps up, its pace grows back to :data:`HISTORY_ROWS_PER_S`.
 
 Shutdown: commands get a bounded grace, the node publishes its NDEATH (it is leaving, so the
 broker's Will is not needed) and disconnects, and the store writes what is queued.
@@ -78,9 +87,18 @@ LEAVE_S = 2.0  # at shutdown, how long the NDEATH and the disconnect may take
 BARRIER_S = 0.2  # how often what was published is confirmed to the store
 DRAIN_IDLE_S = 0.5  # how often an empty store is looked at again
 HISTORY_ROWS_PER_S = 5000.0  # the drain's pace, at most
+HISTORY_MIN_ROWS_PER_S = 50.0  # the pace it slows to, at least, while live data is late
+HISTORY_MESSAGE_ROWS = 50  # changes per history message, at most
+# Live data this late (queued → written, or the loop's wake-up) holds history back: a
+# fraction of the second a host may take to see a change.
+LIVE_LAG_S = 0.1
 MAX_QUEUED = 20_000  # queued live messages past which the broker is too slow: reconnect
 MAX_IN_FLIGHT = 256  # publications handed to the connection and not yet written, at once
 MAX_BEHIND = 100_000  # drive snapshots the pump may fall behind before the oldest are dropped
+
+# A queued message: the effect (None: a change told by no message), the number of the change
+# it carries (None: none), when it was queued, and whether it is history.
+_Out = tuple[Effect | None, int | None, float, bool]
 
 
 class _Leave(FcmasterError):
@@ -130,10 +148,17 @@ class SparkplugAdapter:
         self._outcomes: dict[str, tuple[str, str]] = {}
         self._nominal_hz: dict[str, float] = {}
         # The session's outgoing messages in wire order; each with the number of the change
-        # it carries (None: not a change), so the barrier knows what it confirms.
-        self._queue: deque[tuple[Effect | None, int | None]] = deque()
+        # it carries (None: not a change), so the barrier knows what it confirms, when it
+        # was queued and whether it is history.
+        self._queue: deque[_Out] = deque()
         self._queued = asyncio.Event()
         self._idle = asyncio.Event()  # the queue is empty
+        self._history_out = 0  # history messages queued or handed over and not yet written
+        self._history_written = asyncio.Event()
+        self._lag_s = 0.0  # the latest live data has been since the drain last looked
+        self._pace = _Pace()
+        self.history_messages = 0  # history messages handed to the connection
+        self.history_held = 0  # times the drain waited because live data was late
         self._sent_n = 0
         self._tasks: list[asyncio.Task[None]] = []
         self._subscription: Subscription | None = None
@@ -266,14 +291,18 @@ class SparkplugAdapter:
     def _now_ms(self) -> int:
         return round(self._clock.wall() * 1000)
 
-    def _apply(self, effects: list[Effect], number: int | None = None) -> None:
+    def _apply(
+        self, effects: list[Effect], number: int | None = None, *, history: bool = False
+    ) -> None:
         """Queue ``effects`` in order; ``number``: the change they carry (or told by birth)."""
         if self._client is None:
             return
+        now = self._clock.now()
         if not effects and number is not None and self.node.phase is Phase.ONLINE:
-            self._queue.append((None, number))  # told by no message: confirmed in its turn
+            self._queue.append((None, number, now, False))  # told by no message: in its turn
         for at, effect in enumerate(effects):
-            self._queue.append((effect, number if at == len(effects) - 1 else None))
+            self._queue.append((effect, number if at == len(effects) - 1 else None, now, history))
+        self._history_out += len(effects) if history else 0
         if self._queue:
             self._idle.clear()
             self._queued.set()
@@ -342,6 +371,7 @@ class SparkplugAdapter:
                     log.error("sparkplug.subscribe_refused", topic=topic)
             self.connections += 1
             self._client = client
+            self._history_out, self._lag_s = 0, 0.0
             self.connected.set()
             log.info("sparkplug.connected", host=self._host, port=self._port, bd_seq=bd_seq)
             try:
@@ -401,34 +431,51 @@ class SparkplugAdapter:
                 continue
             if len(queue) > MAX_QUEUED:  # the broker takes less than we make: start afresh
                 raise aiomqtt.MqttError(f"more than {MAX_QUEUED} messages wait for the broker")
-            effect, number = queue.popleft()
+            effect, number, queued_at, history = queue.popleft()
             if isinstance(effect, Disconnect):
                 if last is not None:  # the NDEATH before it is out first
                     await asyncio.wait([last])
                 raise _Leave(effect.reason)
             await slots.acquire()
             last = group.create_task(
-                self._publish(client, effect, number, last, slots), name="sparkplug.publish"
+                self._publish(client, effect, (number, queued_at, history), last, slots),
+                name="sparkplug.publish",
             )
 
     async def _publish(
         self,
         client: aiomqtt.Client,
         effect: Publish | None,
-        number: int | None,
+        told: tuple[int | None, float, bool],
         before: asyncio.Task[None] | None,
         slots: asyncio.Semaphore,
     ) -> None:
-        """Publish ``effect``; once it and all before it are written, count ``number`` sent."""
+        """Publish ``effect``; once it and all before it are written, count its change sent.
+
+        ``told``: the number of the change it carries, when it was queued, whether history.
+        """
+        number, queued_at, history = told
         try:
             if effect is not None:
+                if history:
+                    self.history_messages += 1
                 await client.publish(effect.topic, effect.payload, qos=effect.qos)
+                if not history:  # how late live data is: the drain's measure
+                    self._lag_s = max(self._lag_s, self._clock.now() - queued_at)
             if before is not None and not before.done():
                 await asyncio.wait([before])
         finally:
             slots.release()
+            if history and effect is not None:
+                self._history_out -= 1
+                self._history_written.set()
         if number is not None:
             self._sent_n = max(self._sent_n, number)
+
+    @property
+    def history_rate(self) -> float:
+        """The drain's pace now, in changes per second (lower while live data was late)."""
+        return self._pace.rate
 
     @property
     def published_through(self) -> int:
@@ -452,7 +499,8 @@ class SparkplugAdapter:
                 confirmed = through
 
     async def _drain(self) -> None:
-        """Stored history out, oldest first, one message at a time behind live data."""
+        """Stored history out, oldest first, a message at a time while live data keeps up."""
+        pace = self._pace
         while True:
             if self.node.phase is not Phase.ONLINE:
                 await self._clock.sleep(DRAIN_IDLE_S)
@@ -462,33 +510,84 @@ class SparkplugAdapter:
                 await self.forward.settle(through)
                 await self._clock.sleep(DRAIN_IDLE_S)
                 continue
-            started = self._clock.now()
-            for device, (history, rows) in _by_device(changes).items():
-                await self._idle.wait()  # live data first: history only into an empty queue
+            for device, history, rows in _messages(changes):
+                await self._live_first(pace)
                 if not self.node.is_born(device):
                     self.forward.unborn += rows
                     continue
-                self._apply(self.node.device_history(device, history, self._now_ms()))
+                effects = self.node.device_history(device, history, self._now_ms())
+                self._apply(effects, history=True)
                 self.forward.replayed += rows
+                await self._paced(rows / pace.rate)
             await self._idle.wait()
             client = self._client
             if client is None:
                 return
             await self._barrier(client)
             await self.forward.settle(through)
-            pace_s = len(changes) / HISTORY_ROWS_PER_S - (self._clock.now() - started)
-            if pace_s > 0:
-                await self._clock.sleep(pace_s)
+
+    async def _live_first(self, pace: _Pace) -> None:
+        """Wait until history may go without delaying live data; ``pace`` told what it saw.
+
+        History goes when no live message is queued, the hub holds nothing the pump has not
+        read, the last history message has been written, and no live message since the last
+        look took longer than :data:`LIVE_LAG_S` (nor the loop as long to wake the drain).
+        """
+        subscription = self._subscription
+        yielded = False
+        while True:
+            await self._idle.wait()
+            if self._history_out > 0:
+                self._history_written.clear()
+                await self._history_written.wait()
+                continue
+            if subscription is not None and subscription.pending and not yielded:
+                yielded = True  # the pump's turn first: what it reads is queued ahead
+                await asyncio.sleep(0)
+                continue
+            lag, self._lag_s = self._lag_s, 0.0
+            if lag <= LIVE_LAG_S:
+                pace.keeping_up()
+                return
+            pace.behind()
+            self.history_held += 1
+            await self._clock.sleep(min(lag, 1.0))  # live data catches up meanwhile
+
+    async def _paced(self, seconds: float) -> None:
+        """The drain's pause between messages; a loop that wakes it late counts as lag."""
+        started = self._clock.now()
+        await self._clock.sleep(seconds)
+        self._lag_s = max(self._lag_s, self._clock.now() - started - seconds)
 
 
-def _by_device(changes: list[Change]) -> dict[str, tuple[list[tuple[str, Reading]], int]]:
-    """Changes grouped by device (readings in the order made, and how many changes)."""
-    groups: dict[str, tuple[list[tuple[str, Reading]], int]] = {}
+class _Pace:
+    """The drain's rows per second: halved while live data is late, grown back while not."""
+
+    def __init__(self) -> None:
+        self.rate = HISTORY_ROWS_PER_S
+
+    def behind(self) -> None:
+        self.rate = max(HISTORY_MIN_ROWS_PER_S, self.rate / 2)
+
+    def keeping_up(self) -> None:
+        self.rate = min(HISTORY_ROWS_PER_S, self.rate * 1.1)
+
+
+def _messages(changes: list[Change]) -> list[tuple[str, list[tuple[str, Reading]], int]]:
+    """Changes as history messages: by device, in the order made, a few at a time.
+
+    Each: the device, the readings of at most :data:`HISTORY_MESSAGE_ROWS` changes, and how
+    many changes they are.
+    """
+    by_device: dict[str, list[Change]] = {}
     for change in changes:
-        readings, count = groups.get(change.device, ([], 0))
-        readings.extend(change.readings)
-        groups[change.device] = (readings, count + 1)
-    return groups
+        by_device.setdefault(change.device, []).append(change)
+    messages = []
+    for device, made in by_device.items():
+        for start in range(0, len(made), HISTORY_MESSAGE_ROWS):
+            part = made[start : start + HISTORY_MESSAGE_ROWS]
+            messages.append((device, [r for c in part for r in c.readings], len(part)))
+    return messages
 
 
 def _report_crash(task: asyncio.Task[None]) -> None:

@@ -23,7 +23,7 @@ connection, or left from before a restart — is history: published again with
 ``is_historical``, oldest first, and deleted once a barrier after it has been answered.
 
 The store is bounded as the journal's is (size and age, oldest first); the writer runs off the
-loop, and the reads and deletes here go to a worker thread.
+loop, and the reads (with their parsing) and deletes here go to a worker thread.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from pathlib import Path
 
 from fcmaster.adapters.sparkplug.metrics import Reading
 from fcmaster.adapters.sparkplug.payload import DataType
+from fcmaster.offloop import run_off_loop
 from fcmaster.store import BackgroundWriter, Row, SequenceStore, Stored
 
 __all__ = ["Change", "Forward", "bd_seq_path", "next_bd_seq"]
@@ -121,27 +122,31 @@ class Forward:
     async def backlog(self) -> tuple[list[Change], int]:
         """The next stored changes to publish as history, and the seq they settle through.
 
-        Reads at most :data:`READ_ROWS`; empty with the cursor when there is nothing to do.
+        Reads at most :data:`READ_ROWS`, and parses them, on a worker thread (the loop only
+        sorts them); empty with the cursor when there is nothing to do.
         """
+        cursor = self._cursor
+
+        def read() -> list[tuple[int, tuple[str, int, Change] | None]]:
+            rows = self.writer.call(lambda s: s.read(after=cursor, limit=READ_ROWS))
+            return [(row.seq, _parse(row)) for row in rows]
+
         try:
-            rows = await asyncio.to_thread(
-                self.writer.call, lambda s: s.read(after=self._cursor, limit=READ_ROWS)
-            )
+            rows = await run_off_loop(read)
         except sqlite3.Error:  # not open yet, or the disk failed (the writer logs it)
             return [], self._cursor
         changes: list[Change] = []
         through = self._cursor
-        for row in rows:
-            parsed = _parse(row)
+        for seq, parsed in rows:
             if parsed is None:
-                through = row.seq
+                through = seq
                 continue
             epoch, n, change = parsed
             if epoch == self.epoch and self._pending_live(n):
                 break
             if epoch != self.epoch or not self._delivered(n):
                 changes.append(change)
-            through = row.seq
+            through = seq
         return changes, through
 
     async def settle(self, through: int) -> None:
