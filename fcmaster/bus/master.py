@@ -177,14 +177,14 @@ class BusMaster:
     async def execute(self, name: str | None, command: Command) -> CommandResult:
         """Carry out ``command`` on drive ``name`` (None: broadcast); one result, always."""
         future: asyncio.Future[CommandResult] = asyncio.get_running_loop().create_future()
-        # What the config forbids is refused as such even while the line is down.
-        refusal = self.planner.refusal(name, command)
-        if refusal is None and (not self._up or self._closing):
+        if not self._up or self._closing:
+            # What the config forbids is refused as such even while the line is down.
             reason = f"{self.plan.name} is down: {self.stats.down_reason}"
-            refusal = CommandResult(outcome=Outcome.CANCELLED, reason=reason)
-        if refusal is not None:
+            refusal = self.planner.refusal(name, command) or CommandResult(
+                outcome=Outcome.CANCELLED, reason=reason
+            )
             self._report.resolve([Completion((future,), command, name or "*", refusal)])
-        else:
+        else:  # the planner refuses what the config forbids
             self._report.resolve(self.planner.submit(name, command, future))
             self._runner.wake()
         return await future
