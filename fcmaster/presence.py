@@ -13,8 +13,10 @@ any drive that stops answering.
 
 What counts: a drive the line hears is present; one the line gave up on (demoted) is not;
 one not heard since the line opened keeps what the record said, and so does every drive of
-a line that is down, so an unplugged adapter or the shutdown's closing of the ports never
-empties the record. It is written only when it changes (a drive came or went), atomically
+a line that is down or silent (everything that answered fell quiet together: a cable, the
+adapter, a feeder), so an unplugged adapter, a cut cable or the shutdown's closing of the
+ports never empties the record: a restart before the line is mended still polls those
+drives first once it is. It is written only when it changes (a drive came or went), atomically
 (a new file renamed over the old, synced first), off the event loop.
 """
 
@@ -59,9 +61,9 @@ class PresenceRecord:
         known = self._lines.get(plan.name, {})
         return frozenset(d.address for d in plan.drives if known.get(d.name) == d.address)
 
-    def update(self, bus: str, up: bool, slots: Iterable[DriveSlot]) -> None:
-        """Take what line ``bus`` has heard, if it is ``up`` (see the module docstring)."""
-        if not up:
+    def update(self, bus: str, hearing: bool, slots: Iterable[DriveSlot]) -> None:
+        """Take what line ``bus`` has heard, if it is ``hearing``: up and not silent."""
+        if not hearing:
             return
         known = self._lines.setdefault(bus, {})
         for slot in slots:

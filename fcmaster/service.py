@@ -517,7 +517,8 @@ class Service:
 
     async def _note_presence(self) -> None:
         for name, master in self.masters.items():
-            self.presence.update(name, master.is_up, master.planner.slots)
+            hearing = master.is_up and not master.planner.line_silent
+            self.presence.update(name, hearing, master.planner.slots)
         await self.presence.save()
 
     async def _publish_stats(self) -> None:

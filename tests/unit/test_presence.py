@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -114,10 +115,16 @@ journal:
 """
 
 
-async def first_polls(journal: Path, run_s: float) -> tuple[Service, dict[int, float]]:
-    """Run the service ``run_s`` (virtual) and stop it; when each drive was first answered."""
+async def first_polls(
+    journal: Path, run_s: float, *, cut: tuple[float, float] | None = None
+) -> tuple[Service, dict[int, float]]:
+    """Run the service ``run_s`` (virtual) and stop it; when each drive was first answered.
+
+    ``cut``: from when until when (seconds after the start) the line's cable is cut.
+    """
     clock = VirtualClock(T0)
     drives = [FcDrive(a, silent=a not in PRESENT) for a in range(1, 127)]
+    live = [d for d in drives if not d.silent]
     transports: list[ScriptedTransport] = []
 
     def scripted(_: object) -> ScriptedTransport:
@@ -126,6 +133,13 @@ async def first_polls(journal: Path, run_s: float) -> tuple[Service, dict[int, f
 
     service = Service(parse(fleet_config(journal)), clock=clock, transport_factory=scripted)
     task = asyncio.ensure_future(service.run(install_signals=False))
+    if cut is not None:
+        await clock.run_until(T0 + cut[0])
+        for drive in live:
+            drive.silent = True
+        await clock.run_until(T0 + min(cut[1], run_s))
+        for drive in live:
+            drive.silent = False
     await clock.run_until(T0 + run_s)
     service.stop()
     await clock.complete(task, within=60.0)
@@ -149,3 +163,20 @@ async def test_a_restart_polls_the_drives_that_answered_before_at_once(tmp_path:
     _, first = await first_polls(journal, 5.0)
     assert set(first) == PRESENT
     assert max(first.values()) < 1.0
+
+
+async def test_a_line_fallen_silent_keeps_the_record_for_a_restart(tmp_path: Path) -> None:
+    journal = tmp_path / "journal.db"
+    record = tmp_path / "journal.db.present.json"
+    present = {"line1": {f"d{a}": a for a in sorted(PRESENT)}}
+    record.write_text(json.dumps(present))
+    # The cable is cut 5 s after the start; the gateway is restarted a minute later.
+    await first_polls(journal, 65.0, cut=(5.0, math.inf))
+    assert json.loads(record.read_text()) == present
+    # Started again before the cable is mended, 20 s later: the drives that answered
+    # before are taken for a silent line and asked again at once when it answers, all
+    # within a second (a first start would leave 111-126 a minute behind the absent ones).
+    _, first = await first_polls(journal, 40.0, cut=(0.0, 20.0))
+    assert set(first) == PRESENT
+    assert min(first.values()) >= 20.0
+    assert max(first.values()) < 21.0
