@@ -25,6 +25,7 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import time
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -32,6 +33,7 @@ import structlog
 
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.steps import DriveSlot
+from fcmaster.store import REPEAT_ERROR_S
 from fcmaster.store_settings import MEMORY, StoreSettings
 
 __all__ = ["PresenceRecord", "presence_path"]
@@ -55,6 +57,8 @@ class PresenceRecord:
         self.path = path
         self._lines: dict[str, dict[str, int]] = _read(path) if path is not None else {}
         self._saved = _encode(self._lines)
+        self._failing = False  # the last write failed
+        self._told_at = -REPEAT_ERROR_S  # when a failure was last logged (monotonic)
 
     def answered_before(self, plan: LinePlan) -> frozenset[int]:
         """The addresses of ``plan``'s drives that answered when the daemon last ran."""
@@ -80,8 +84,14 @@ class PresenceRecord:
         try:
             await asyncio.to_thread(_write, self.path, text)
         except OSError as exc:  # a full or read-only disk: the lines go on regardless
-            log.warning("presence.write_failed", path=str(self.path), error=str(exc))
+            # Tried again at every check; told when it begins to fail, at most every
+            # REPEAT_ERROR_S, as the journal's writer does (not every second for months).
+            if not self._failing and time.monotonic() - self._told_at >= REPEAT_ERROR_S:
+                self._told_at = time.monotonic()
+                log.warning("presence.write_failed", path=str(self.path), error=str(exc))
+            self._failing = True
             return
+        self._failing = False
         self._saved = text
 
 

@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 
 import pytest
+import structlog
 
 from fcmaster.bus.plan import DrivePlan, LinePlan
 from fcmaster.bus.steps import DriveSlot
@@ -82,6 +83,23 @@ def test_a_drive_moved_to_another_address_or_line_is_not_taken_for_the_one_recor
     path.write_text(json.dumps({"line1": {"a": 1, "b": 2}, "line2": {"c": 3}}))
     record = PresenceRecord(path)
     assert record.answered_before(line(("a", 1), ("b", 5), ("c", 3))) == {1}
+
+
+async def test_a_record_that_cannot_be_written_is_told_once_and_written_when_it_can(
+    tmp_path: Path,
+) -> None:
+    folder = tmp_path / "gone"
+    record = PresenceRecord(folder / "journal.db.present.json")
+    with structlog.testing.capture_logs() as logs:
+        for address in (1, 2, 3):  # three changes, each tried and failed
+            record.update("line1", True, [slot(f"d{address}", address, True)])
+            await record.save()
+    assert [entry["event"] for entry in logs] == ["presence.write_failed"]
+    folder.mkdir()
+    await record.save()
+    assert json.loads((folder / "journal.db.present.json").read_text()) == {
+        "line1": {"d1": 1, "d2": 2, "d3": 3}
+    }
 
 
 @pytest.mark.parametrize("text", ["{not json", "[1, 2]", '{"line1": {"a": "1"}}', ""])
