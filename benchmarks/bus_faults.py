@@ -32,6 +32,7 @@ import asyncio
 import contextlib
 import itertools
 import json
+import math
 import os
 import subprocess
 import sys
@@ -71,10 +72,19 @@ async def _serve_sim(spec: dict[str, Any]) -> None:
         silent_periods=tuple(tuple(p) for p in spec.get("silent", ())),  # type: ignore[misc]
         seed=1,
     )
+    # Drives that lose power at a time of the line's and stay off: {"at": s, "addresses": […]}.
+    loss = spec.get("power_loss") or {"at": math.inf, "addresses": []}
+    off = FaultPlan(silent_periods=((loss["at"], math.inf),))
     line = build_line(
-        LineSettings(name="bench", baudrate=BAUD, faults=faults),
+        LineSettings(name="bench", baudrate=spec.get("baudrate", BAUD), faults=faults),
         [
-            (a, DriveSettings(response_delay_s=DELAY_S))
+            (
+                a,
+                DriveSettings(
+                    response_delay_s=spec.get("delay_s", DELAY_S),
+                    faults=off if a in loss["addresses"] else None,
+                ),
+            )
             for a in spec.get("addresses") or range(1, spec["drives"] + 1)
         ],
         clock=clock,
