@@ -20,6 +20,10 @@ apply: the line has nothing better to do. Only unanswered probes count against t
 an answered one served a drive that is there, so at start the present drives are found one
 after the other at once.
 
+When many drives that answered stop at once (a cabinet's supply), the drives still
+answering are polled between their misses until each has answered or been given up
+(:mod:`~fcmaster.bus.misses`), so they never wait behind a whole round of misses.
+
 When every drive that was answering falls silent together, it is the line (a cable, the
 adapter, the power) rather than the drives: they are reported offline but probed one after
 the other at once, not at the slow probe interval, and as soon as anything answers the
@@ -35,6 +39,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from fcmaster.bus.misses import STREAK_AFTER_S, Misses
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.steps import DriveSlot, Report, StepKind, Transition
 
@@ -89,6 +94,9 @@ class Rotation:
         # Answering when the port was lost, or when the daemon last ran.
         self._answered_before_down: set[int] = before
         self.silent = False  # the whole line fell silent
+        self._misses = Misses()  # misses in a row: the drives still answering go between
+        self._missed_s = 0.0  # line time the polls missed since the line last answered took
+        self._poll_started = 0.0
 
     def reconfigure(self, plan: LinePlan, slots: list[DriveSlot]) -> None:
         """The line's drives are now ``slots``: the round goes on at the drive due next."""
@@ -112,6 +120,7 @@ class Rotation:
         self._quick = sum(slot.quick_probe for slot in self._demoted)
         self._streak &= kept
         self._answered_before_down &= kept
+        self._misses.forget(kept)
 
     # -- choosing ------------------------------------------------------------------------
 
@@ -120,11 +129,14 @@ class Rotation:
         slots, untried = self.slots, self._untried
         count = len(slots)
         poll = None
-        for offset in range(count):
-            slot = slots[(self._next_poll + offset) % count]
-            if slot.online is not False and slot.deaf_until <= now and id(slot) not in untried:
-                poll = slot
-                break
+        if self._misses.active:
+            poll = self._misses.choose(slots, now, lambda slot: self._pollable(slot, now))
+        if poll is None:
+            for offset in range(count):
+                slot = slots[(self._next_poll + offset) % count]
+                if slot.online is not False and slot.deaf_until <= now and id(slot) not in untried:
+                    poll = slot
+                    break
         if (self._demoted or untried) and (
             poll is None or self._quick or now >= self._probe_ready_at
         ):
@@ -161,7 +173,11 @@ class Rotation:
             self._probe_budgeted = True
             return
         if choice.kind is StepKind.POLL:
-            self._next_poll = (self._index[id(slot)] + 1) % len(self.slots)
+            self._poll_started = now
+            if self._misses.active:  # the round goes on where it was once the streak ends
+                self._misses.chosen(slot, self._index[id(slot)], len(self.slots), now)
+            else:
+                self._next_poll = (self._index[id(slot)] + 1) % len(self.slots)
             return
         self._probe_started = now
         self._probe_budgeted = not slot.quick_probe
@@ -182,6 +198,8 @@ class Rotation:
     def heard(self, slot: DriveSlot, kind: StepKind | None, now: float, report: Report) -> None:
         """``slot`` answered (``kind``: the step's, None for a command's)."""
         slot.failures = 0
+        self._misses.heard_at[id(slot)] = now
+        self._missed_s = 0.0
         self._heard = True
         self._streak.clear()
         self._answered_before_down.clear()
@@ -224,6 +242,11 @@ class Rotation:
                 self._quick -= 1
                 slot.next_probe_at = now + self.plan.probe_interval_s
             return
+        if kind is StepKind.POLL and slot.online is not False:
+            cost = now - self._poll_started + tail_s
+            self._missed_s += cost
+            if self._misses.active or self._missed_s >= STREAK_AFTER_S:
+                self._misses.missed(now, cost)
         if slot.online is False or slot.failures < self.plan.offline_after:
             return
         # The drives that answered; right after a reopen, those that answered before it.
@@ -252,11 +275,17 @@ class Rotation:
         self.silent = False
         self._heard = False
         self._streak.clear()
+        self._missed_s = 0.0
+        self._misses.end()
         # Kept over reopens with no answer between them: they still answered before.
         self._answered_before_down.update(id(s) for s in self.slots if s.online is True)
         for slot in self._demoted:
             slot.quick_probe = False
         self._quick = 0
+
+    def _pollable(self, slot: DriveSlot, now: float) -> bool:
+        """Whether ``slot`` is polled as present now (not demoted, not untried, not deaf)."""
+        return slot.online is not False and slot.deaf_until <= now and id(slot) not in self._untried
 
     def _probe_ended(self, now: float, tail_s: float) -> None:
         if self._probe_budgeted:

@@ -1,0 +1,111 @@
+"""Many drives missing their polls in a row: the drives still answering go in between.
+
+Round-robin alone serves a line badly when many drives stop answering at once (a cabinet's
+supply switched off, a feeder tripped, a restart that finds part of the plant unpowered):
+the drives still answering wait behind every silent one's reply deadline, each missed
+``offline_after`` times. 110 of 126 drives losing power left the 16 others unanswered for
+6 s at 19200 baud with the default deadlines and 13 s with ``timeout_s: 0.1``, three rounds
+over, long enough for their control-word watchdogs to stop the motors
+(``benchmarks/mass_loss.py``).
+
+So once the polls missed since the line last answered have taken ``STREAK_AFTER_S`` (more
+than a lost reply or two at the deadlines the line measures) and until every drive is
+answering again or given up (a **miss streak**), the rotation chooses differently. A drive
+is *confirmed* once it answers during the streak. Each drive not confirmed yet is *tried* in
+turn, the one heard from most recently first (after a mass loss, those that answered after
+the first miss are alive, and those polled just before it are likelier to be than the rest
+of the round), then the one tried longest ago. A try that is answered is followed by the
+next try at once (usually the whole line answers, and one lost reply costs a round in the
+reverse order, no more); after a try that misses, the confirmed drives are polled,
+round-robin, for as long as the miss took (``MISS_SHARE``: the misses take at most half the
+line while drives answer) but each once at most. The drives still answering are then polled
+between the misses, and the silent ones still reach their ``offline_after`` misses each, in
+about twice the time they would alone. The streak ends when no drive is left to try. Until a
+drive is confirmed it waits for its try like the others: right after a mass loss, the first
+of the drives still answering is found behind the silent ones heard more recently than it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from fcmaster.bus.steps import DriveSlot
+
+MISS_SHARE = 0.5  # the most of the line's time misses take in a streak while others answer
+# A streak begins once the polls missed since the line last answered took this long: until
+# then round-robin costs the drives still answering no more than a lost reply or two would.
+STREAK_AFTER_S = 0.2
+
+
+class Misses:
+    """The miss streak of one line: which drive to poll while it lasts."""
+
+    def __init__(self) -> None:
+        self.heard_at: dict[int, float] = {}  # by id(slot): when each drive last answered
+        self._since: float | None = None  # when the streak began (None: no streak)
+        self._owed_until = -math.inf  # confirmed drives are polled until then, after a miss
+        self._next_confirmed = 0  # where the round of the confirmed drives goes on
+        self._tried: dict[int, float] = {}  # by id(slot): when tried in this streak
+        self._passed: set[int] = set()  # confirmed drives polled since the last miss
+
+    @property
+    def active(self) -> bool:
+        """Whether a streak is on (:meth:`choose` decides the polls)."""
+        return self._since is not None
+
+    def missed(self, now: float, cost_s: float) -> None:
+        """A drive polled as answering missed at ``now``, having cost the line ``cost_s``."""
+        if self._since is None:
+            self._since = now
+        self._owed_until = now + cost_s * (1.0 - MISS_SHARE) / MISS_SHARE
+        self._passed.clear()
+
+    def choose(
+        self, slots: list[DriveSlot], now: float, pollable: Callable[[DriveSlot], bool]
+    ) -> DriveSlot | None:
+        """The drive to poll next in the streak; None ends it (no drive is left to try)."""
+        count = len(slots)
+        if now < self._owed_until:
+            for offset in range(count):
+                slot = slots[(self._next_confirmed + offset) % count]
+                if pollable(slot) and self._confirmed(slot) and id(slot) not in self._passed:
+                    return slot
+        best: DriveSlot | None = None
+        best_key = (math.inf, math.inf)
+        tried, heard_at = self._tried, self.heard_at
+        for slot in slots:  # in the round's order: ties go to the first
+            if not pollable(slot) or self._confirmed(slot):
+                continue
+            # Not tried in this streak yet, most recently heard first; then the least
+            # recently tried.
+            key = (tried.get(id(slot), -math.inf), -heard_at.get(id(slot), -math.inf))
+            if key < best_key:
+                best, best_key = slot, key
+        if best is None:
+            self.end()
+        return best
+
+    def chosen(self, slot: DriveSlot, index: int, count: int, now: float) -> None:
+        """``slot`` (at ``index`` of ``count``), which :meth:`choose` gave, is polled at ``now``."""
+        self._passed.add(id(slot))  # a try that is answered has had its turn too
+        if self._confirmed(slot):
+            self._next_confirmed = (index + 1) % count
+        else:
+            self._tried[id(slot)] = now
+
+    def end(self) -> None:
+        """No streak (it ran out, or the line closed or changed)."""
+        self._since = None
+        self._owed_until = -math.inf
+        self._tried.clear()
+        self._passed.clear()
+
+    def forget(self, kept: set[int]) -> None:
+        """Only the drives (by id) in ``kept`` are on the line now."""
+        self.heard_at = {i: at for i, at in self.heard_at.items() if i in kept}
+        self.end()
+
+    def _confirmed(self, slot: DriveSlot) -> bool:
+        since = self._since
+        return since is not None and self.heard_at.get(id(slot), -math.inf) >= since

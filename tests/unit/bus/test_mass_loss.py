@@ -1,0 +1,107 @@
+"""Most of a running line losing power at once, in virtual time: who is polled, and when.
+
+110 of 126 drives stop answering together (a cabinet's supply, a feeder). Round-robin alone
+would poll each of them in its turn until it had missed ``offline_after`` polls, and the 16
+drives still on would wait behind every miss, three rounds over: 110 misses each time. A
+miss streak polls the drives still answering between the misses instead, and the silent
+ones are still given up after exactly ``offline_after`` misses each.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Container
+from typing import Any
+
+import pytest
+
+from fcmaster.bus.misses import STREAK_AFTER_S
+from fcmaster.bus.plan import DrivePlan
+from fcmaster.protocol.danfoss_fc import decode_telegram
+from tests.unit.bus.bench import DELAY_S, PARAMETER, PAUSE_S, T0, Bench, bench, exchange_s
+from tests.unit.bus.fcdrive import FcDrive
+
+ON = range(1, 17)  # the drives that keep their power
+LOST_AT = T0 + 10.0
+POLL_S = exchange_s(PARAMETER, PARAMETER) + PAUSE_S  # one answered poll, pause included
+END = LOST_AT + 120.0
+
+
+async def lose_power(lost: Container[int], lost_at: float = LOST_AT, **options: Any) -> Bench:
+    """126 drives, all answering, until the drives at ``lost`` lose power at ``lost_at``."""
+    fc = [FcDrive(a) for a in range(1, 127)]
+    b = bench(*(DrivePlan(name=f"d{a}", address=a) for a in range(1, 127)), fc=fc, **options)
+    async with b.master:
+        await b.clock.run_until(lost_at)
+        assert all(slot.online for slot in b.master.planner.slots)
+        for drive in fc:
+            drive.silent = drive.address in lost
+        await b.clock.run_until(END)
+    return b
+
+
+def longest_wait(b: Bench, on: Container[int]) -> float:
+    """The longest a drive of ``on`` went without an answer, from just before the loss."""
+    answered: dict[int, list[float]] = {}
+    for sent in b.transport.sent:
+        address = decode_telegram(sent.data, from_drive=False).address
+        if address in on and sent.at >= LOST_AT - 1.0 and sent.reply_at is not None:
+            answered.setdefault(address, []).append(sent.at)
+    return max(y - x for times in answered.values() for x, y in itertools.pairwise([*times, END]))
+
+
+def miss_s(b: Bench, **options: Any) -> float:
+    """Line time one unanswered parameter poll takes: its deadline, then the drain after it.
+
+    The scripted drives answer DELAY_S after the wire time, so the measured deadline is the
+    wire time, that delay and the smallest margin (the answer time once more).
+    """
+    plan = b.plan
+    deadline = options.get("timeout_s") or plan.wire_s(2 * PARAMETER) + 2 * DELAY_S
+    return deadline + plan.wire_s(PARAMETER) + plan.gap_s
+
+
+@pytest.mark.parametrize("options", [{}, {"timeout_s": 0.1}], ids=["default", "timeout_0.1"])
+async def test_the_drives_still_on_are_polled_between_the_misses_of_the_others(
+    options: dict[str, Any],
+) -> None:
+    b = await lose_power(range(17, 127), **options)
+    lost = range(17, 127)
+    # The drives still on: never a long wait, however many misses the line had to take.
+    longest = longest_wait(b, ON)
+    # Once the misses in a row have taken STREAK_AFTER_S, each drive still on is polled at
+    # least once for every miss of as many silent drives as there are drives on: round-robin
+    # would make it wait through all 110 misses (6 s with the default deadline, 12 s at 0.1 s).
+    miss = miss_s(b, **options)
+    assert longest <= STREAK_AFTER_S + len(ON) * (POLL_S + miss)
+    assert longest < len(lost) * miss / 4
+    assert not any(not up and int(name[1:]) in ON for name, up, _ in b.observer.availability)
+    # The others: each given up after exactly offline_after polls of its own since the loss.
+    offline = {name: at for name, up, at in b.observer.availability if not up}
+    assert set(offline) == {f"d{a}" for a in lost}
+    for address in lost:
+        polls = [at for at, _ in b.requests(address) if LOST_AT <= at < offline[f"d{address}"]]
+        assert len(polls) == b.plan.offline_after
+
+
+async def test_a_lone_drive_losing_power_leaves_the_round_as_it_was() -> None:
+    b = await lose_power(range(40, 41))
+    after = [t.address for at, t in b.requests() if LOST_AT <= at < LOST_AT + 30.0]
+    polls = [a for a in after if a != 40]
+    # The others keep their round-robin order: each address follows the one before it.
+    assert all(y == x % 126 + 1 or (x, y) == (39, 41) for x, y in itertools.pairwise(polls))
+
+
+@pytest.mark.parametrize("options", [{}, {"timeout_s": 0.1}], ids=["default", "timeout_0.1"])
+@pytest.mark.parametrize("after_s", [0.0, 0.9, 1.7], ids=["round_start", "mid", "late"])
+async def test_drives_still_on_behind_the_silent_ones_are_found_within_half_a_round(
+    options: dict[str, Any], after_s: float
+) -> None:
+    # Still on: 1 and 112-126, behind 110 silent drives; the loss at three points of a round.
+    on = {1, *range(112, 127)}
+    lost = set(range(1, 127)) - on
+    b = await lose_power(lost, LOST_AT + after_s, **options)
+    longest = longest_wait(b, on)
+    # Found at its try, after the silent drives heard more recently: round-robin waits
+    # through all 110 misses, the streak through fewer, with the others polled in between.
+    assert longest < len(lost) * miss_s(b, **options) / 2
