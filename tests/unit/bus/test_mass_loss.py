@@ -105,3 +105,27 @@ async def test_drives_still_on_behind_the_silent_ones_are_found_within_half_a_ro
     # Found at its try, after the silent drives heard more recently: round-robin waits
     # through all 110 misses, the streak through fewer, with the others polled in between.
     assert longest < len(lost) * miss_s(b, **options) / 2
+
+
+@pytest.mark.parametrize("options", [{}, {"timeout_s": 0.1}], ids=["default", "timeout_0.1"])
+async def test_a_restart_whose_record_names_drives_gone_since_serves_the_others_between(
+    options: dict[str, Any],
+) -> None:
+    # The record of the drives answering names all 126; 110 lost power while the gateway
+    # was down. Polled as present, each is given up after its misses, as after a loss.
+    fc = [FcDrive(a, silent=a not in ON) for a in range(1, 127)]
+    drives = (DrivePlan(name=f"d{a}", address=a) for a in range(1, 127))
+    b = bench(*drives, fc=fc, answered_before=frozenset(range(1, 127)), **options)
+    async with b.master:
+        await b.clock.run_until(END)
+    answered: dict[int, list[float]] = {a: [T0] for a in ON}  # from the start
+    for sent in b.transport.sent:
+        address = decode_telegram(sent.data, from_drive=False).address
+        if address in answered and sent.reply_at is not None:
+            answered[address].append(sent.at)
+    longest = max(y - x for times in answered.values() for x, y in itertools.pairwise(times))
+    miss = miss_s(b, **options)
+    assert longest <= STREAK_AFTER_S + len(ON) * (POLL_S + miss)  # round-robin: 6 s, 13 s
+    assert {name for name, up, _ in b.observer.availability if not up} == {
+        f"d{a}" for a in range(17, 127)
+    }
