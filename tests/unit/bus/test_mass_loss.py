@@ -15,9 +15,11 @@ from typing import Any
 
 import pytest
 
+from fcmaster.bus.commands import Outcome
 from fcmaster.bus.misses import STREAK_AFTER_S
 from fcmaster.bus.plan import DrivePlan
-from fcmaster.protocol.danfoss_fc import decode_telegram
+from fcmaster.protocol.danfoss_fc import ControlWord, decode_telegram
+from tests.orders import orders
 from tests.unit.bus.bench import DELAY_S, PARAMETER, PAUSE_S, T0, Bench, bench, exchange_s
 from tests.unit.bus.fcdrive import FcDrive
 
@@ -129,3 +131,31 @@ async def test_a_restart_whose_record_names_drives_gone_since_serves_the_others_
     assert {name for name, up, _ in b.observer.availability if not up} == {
         f"d{a}" for a in range(17, 127)
     }
+
+
+async def test_a_stop_during_the_streak_goes_out_next_and_is_carried_out() -> None:
+    fc = [FcDrive(a) for a in range(1, 127)]
+    plans = (DrivePlan(name=f"d{a}", address=a, control=a == 5) for a in range(1, 127))
+    b = bench(*plans, fc=fc)
+    async with b.master:
+        await b.clock.run_until(LOST_AT)
+        started = await b.complete(b.submit(orders(b.master, "d5").start(frequency_hz=30)))
+        assert started.outcome is Outcome.DONE
+        assert fc[4].running
+        for drive in fc[16:]:
+            drive.silent = True
+        await b.clock.run_until(LOST_AT + 2.0)
+        asked_at = b.clock.now()
+        # The streak is on: silent drives tried, the drives still on polled between.
+        recent = {t.address for at, t in b.requests() if at > asked_at - 0.5}
+        assert recent & set(ON)
+        assert recent - set(ON)
+        in_flight = len(b.transport.sent)  # the exchange on the wire now finishes first
+        stopped = await b.complete(b.submit(orders(b.master, "d5").stop()))
+        assert stopped.outcome is Outcome.DONE
+    after = b.transport.sent[in_flight:]
+    first = decode_telegram(after[0].data, from_drive=False)
+    assert first.address == 5
+    assert not first.pcd1 & ControlWord.START
+    assert after[0].at - asked_at < 0.2  # at most the exchange in flight before it
+    assert not fc[4].running
