@@ -83,6 +83,9 @@ class Misses:
             if key < best_key:
                 best, best_key = slot, key
         if best is None:
+            # Peeking should change nothing, but ending here is safe: no drive is left to try,
+            # and the round takes over; a drive that becomes pollable later (one restarting
+            # after a reset, a demoted one found again) is served by the round, as before.
             self.end()
         return best
 
