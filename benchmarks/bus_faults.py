@@ -73,8 +73,8 @@ async def _serve_sim(spec: dict[str, Any]) -> None:
         seed=1,
     )
     # Drives that lose power at a time of the line's and stay off: {"at": s, "addresses": […]}.
-    loss = spec.get("power_loss") or {"at": math.inf, "addresses": []}
-    off = FaultPlan(silent_periods=((loss["at"], math.inf),))
+    loss = spec.get("power_loss")
+    off = FaultPlan(silent_periods=((loss["at"], math.inf),)) if loss else None
     line = build_line(
         LineSettings(name="bench", baudrate=spec.get("baudrate", BAUD), faults=faults),
         [
@@ -82,7 +82,7 @@ async def _serve_sim(spec: dict[str, Any]) -> None:
                 a,
                 DriveSettings(
                     response_delay_s=spec.get("delay_s", DELAY_S),
-                    faults=off if a in loss["addresses"] else None,
+                    faults=off if loss and a in loss["addresses"] else None,
                 ),
             )
             for a in spec.get("addresses") or range(1, spec["drives"] + 1)
