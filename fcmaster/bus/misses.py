@@ -1,28 +1,27 @@
-"""Many drives missing their polls in a row: the drives still answering go in between.
+"""Many drives missing their polls in a row: after one round, the others go in between.
 
 Round-robin alone serves a line badly when many drives stop answering at once (a cabinet's
 supply switched off, a feeder tripped, a restart that finds part of the plant unpowered):
 the drives still answering wait behind every silent one's reply deadline, each missed
 ``offline_after`` times. 110 of 126 drives losing power left the 16 others unanswered for
 6 s at 19200 baud with the default deadlines and 13 s with ``timeout_s: 0.1``, three rounds
-over, long enough for their control-word watchdogs to stop the motors
-(``benchmarks/mass_loss.py``).
+over (``benchmarks/mass_loss.py``).
 
 So once the polls missed since the line last answered have taken ``STREAK_AFTER_S`` (more
 than a lost reply or two at the deadlines the line measures) and until every drive is
 answering again or given up (a **miss streak**), the rotation chooses differently. A drive
-is *confirmed* once it answers during the streak. Each drive not confirmed yet is *tried* in
-turn, the one heard from most recently first (after a mass loss, those that answered after
-the first miss are alive, and those polled just before it are likelier to be than the rest
-of the round), then the one tried longest ago. A try that is answered is followed by the
-next try at once (usually the whole line answers, and one lost reply costs a round in the
-reverse order, no more); after a try that misses, the confirmed drives are polled,
+is *confirmed* once it answers during the streak. First every drive not confirmed is
+*tried* once, the one heard longest ago first (the round's own order, the misses that began
+the streak counting as tries): nothing tells a drive still on from a silent one until it is
+asked, and the one heard longest ago is the nearest to its control-word timeout, so no
+drive still on waits longer than round-robin would have made it. A try that is answered is
+followed by the next try at once. From then on the drives that missed are tried again, the
+one tried longest ago first, and after each such miss the confirmed drives are polled,
 round-robin, for as long as the miss took (``MISS_SHARE``: the misses take at most half the
-line while drives answer) but each once at most. The drives still answering are then polled
-between the misses, and the silent ones still reach their ``offline_after`` misses each, in
-about twice the time they would alone. The streak ends when no drive is left to try. Until a
-drive is confirmed it waits for its try like the others: right after a mass loss, the first
-of the drives still answering is found behind the silent ones heard more recently than it.
+line while drives answer), each once at most. So the drives still answering wait behind one
+round of misses, not ``offline_after`` rounds, and the silent ones still reach their
+``offline_after`` misses each, in the time of about five rounds of misses instead of three.
+The streak ends when no drive is left to try.
 """
 
 from __future__ import annotations
@@ -47,6 +46,8 @@ class Misses:
         self._owed_until = -math.inf  # confirmed drives are polled until then, after a miss
         self._next_confirmed = 0  # where the round of the confirmed drives goes on
         self._tried: dict[int, float] = {}  # by id(slot): when tried in this streak
+        self._tries: dict[int, int] = {}  # by id(slot): how often tried in this streak
+        self._missed_s = 0.0  # line time the misses since the line last answered took
         self._passed: set[int] = set()  # confirmed drives polled since the last miss
 
     @property
@@ -54,10 +55,26 @@ class Misses:
         """Whether a streak is on (:meth:`choose` decides the polls)."""
         return self._since is not None
 
-    def missed(self, now: float, cost_s: float) -> None:
-        """A drive polled as answering missed at ``now``, having cost the line ``cost_s``."""
+    def heard(self, slot: DriveSlot, now: float) -> None:
+        """``slot`` answered at ``now``."""
+        self.heard_at[id(slot)] = now
+        if self._since is None:  # the misses before it do not add up to a streak
+            self._missed_s = 0.0
+            self._tried.clear()
+            self._tries.clear()
+
+    def missed(self, slot: DriveSlot, now: float, cost_s: float) -> None:
+        """``slot``, polled as answering, missed at ``now``, having cost the line ``cost_s``."""
         if self._since is None:
-            self._since = now
+            # Before a streak the round chose it: its try in the streak to come.
+            self._tried[id(slot)] = now
+            self._tries[id(slot)] = 1
+            self._missed_s += cost_s
+            if self._missed_s >= STREAK_AFTER_S:
+                self._since = now
+            return
+        if self._tries.get(id(slot), 0) < 2:
+            return  # the first pass: every drive not heard since is tried, oldest first
         self._owed_until = now + cost_s * (1.0 - MISS_SHARE) / MISS_SHARE
         self._passed.clear()
 
@@ -77,9 +94,9 @@ class Misses:
         for slot in slots:  # in the round's order: ties go to the first
             if not pollable(slot) or self._confirmed(slot):
                 continue
-            # Not tried in this streak yet, most recently heard first; then the least
-            # recently tried.
-            key = (tried.get(id(slot), -math.inf), -heard_at.get(id(slot), -math.inf))
+            # Not tried in this streak yet, the one heard longest ago first (the round's
+            # order); then the one tried longest ago.
+            key = (tried.get(id(slot), -math.inf), heard_at.get(id(slot), -math.inf))
             if key < best_key:
                 best, best_key = slot, key
         if best is None:
@@ -96,12 +113,15 @@ class Misses:
             self._next_confirmed = (index + 1) % count
         else:
             self._tried[id(slot)] = now
+            self._tries[id(slot)] = self._tries.get(id(slot), 0) + 1
 
     def end(self) -> None:
         """No streak (it ran out, or the line closed or changed)."""
         self._since = None
+        self._missed_s = 0.0
         self._owed_until = -math.inf
         self._tried.clear()
+        self._tries.clear()
         self._passed.clear()
 
     def forget(self, kept: set[int]) -> None:

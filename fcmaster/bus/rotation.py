@@ -20,9 +20,10 @@ apply: the line has nothing better to do. Only unanswered probes count against t
 an answered one served a drive that is there, so at start the present drives are found one
 after the other at once.
 
-When many drives that answered stop at once (a cabinet's supply), the drives still
-answering are polled between their misses until each has answered or been given up
-(:mod:`~fcmaster.bus.misses`), so they never wait behind a whole round of misses.
+When many drives that answered stop at once (a cabinet's supply), each is tried once in the
+round's order and from then on the drives still answering are polled between their misses
+until each has answered or been given up (:mod:`~fcmaster.bus.misses`), so they wait behind
+one round of misses, not ``offline_after`` rounds.
 
 When every drive that was answering falls silent together, it is the line (a cable, the
 adapter, the power) rather than the drives: they are reported offline but probed one after
@@ -39,7 +40,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from fcmaster.bus.misses import STREAK_AFTER_S, Misses
+from fcmaster.bus.misses import Misses
 from fcmaster.bus.plan import LinePlan
 from fcmaster.bus.steps import DriveSlot, Report, StepKind, Transition
 
@@ -95,7 +96,6 @@ class Rotation:
         self._answered_before_down: set[int] = before
         self.silent = False  # the whole line fell silent
         self._misses = Misses()  # misses in a row: the drives still answering go between
-        self._missed_s = 0.0  # line time the polls missed since the line last answered took
         self._poll_started = 0.0
 
     def reconfigure(self, plan: LinePlan, slots: list[DriveSlot]) -> None:
@@ -198,8 +198,7 @@ class Rotation:
     def heard(self, slot: DriveSlot, kind: StepKind | None, now: float, report: Report) -> None:
         """``slot`` answered (``kind``: the step's, None for a command's)."""
         slot.failures = 0
-        self._misses.heard_at[id(slot)] = now
-        self._missed_s = 0.0
+        self._misses.heard(slot, now)
         self._heard = True
         self._streak.clear()
         self._answered_before_down.clear()
@@ -243,10 +242,7 @@ class Rotation:
                 slot.next_probe_at = now + self.plan.probe_interval_s
             return
         if kind is StepKind.POLL and slot.online is not False:
-            cost = now - self._poll_started + tail_s
-            self._missed_s += cost
-            if self._misses.active or self._missed_s >= STREAK_AFTER_S:
-                self._misses.missed(now, cost)
+            self._misses.missed(slot, now, now - self._poll_started + tail_s)
         if slot.online is False or slot.failures < self.plan.offline_after:
             return
         # The drives that answered; right after a reopen, those that answered before it.
@@ -275,7 +271,6 @@ class Rotation:
         self.silent = False
         self._heard = False
         self._streak.clear()
-        self._missed_s = 0.0
         self._misses.end()
         # Kept over reopens with no answer between them: they still answered before.
         self._answered_before_down.update(id(s) for s in self.slots if s.online is True)

@@ -14,7 +14,7 @@ from fcmaster import config as config_module
 from fcmaster import logsetup
 from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.plan import LinePlan
-from fcmaster.bus.poll_round import poll_round_s
+from fcmaster.bus.poll_round import poll_round_s, stranded_s
 from fcmaster.bus.rotation import probe_period_s
 from fcmaster.errors import ConfigError, UsageError
 from fcmaster.subcommands.ports import unstable_ports
@@ -78,6 +78,13 @@ def check(path: Path, *, machine: Machine | None = None) -> int:
                 f"  {plan.name}: an absent drive is probed within "
                 f"{longest_probe_wait_s(plan):.1f} s even with all others but one absent "
                 f"(probes take at most {plan.probe_share:.0%} of the line while drives answer)"
+            )
+    for plan in config.lines:
+        if len(plan.drives) > 1:
+            print(
+                f"  {plan.name}: should all other drives stop answering at once (a cabinet's "
+                f"supply cut), a drive may wait up to {stranded_s(plan):.1f} s for its poll, "
+                "once, while each of them is tried"
             )
     for unstable in unstable_ports(config.lines, machine):
         print(f"  warning: {unstable.message()}")

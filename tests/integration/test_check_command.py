@@ -93,6 +93,28 @@ def test_a_good_file_exits_0_with_a_summary_and_each_lines_worst_case_poll_round
     assert out[7].startswith("  roof: an absent drive is probed within 5.0 s")
 
 
+def test_check_says_how_long_a_drive_may_wait_when_all_the_others_stop_answering(
+    tmp_path: Path,
+) -> None:
+    drives = "\n".join(f"      - {{name: d{a}, address: {a}, control: bus}}" for a in range(1, 33))
+    config = tmp_path / "long.yaml"
+    config.write_text(
+        f"buses:\n  - name: long\n    port: /dev/ttyUSB0\n    baudrate: 19200\n    timeout_s: 0.1\n"
+        f"    drives:\n{drives}\n"
+    )
+    result = _check(config)
+    assert result.returncode == 0, result.stderr
+    # Each of the other 31 misses its FC parameter poll (16-byte reply, 8E1 at 19200): the
+    # user's 0.1 s deadline, then the reply's length and a 3.5-character gap for a late one.
+    char_s = 11 / 19200
+    miss_s = 0.1 + 16 * char_s + 3.5 * char_s
+    assert (
+        f"  long: should all other drives stop answering at once (a cabinet's supply cut), "
+        f"a drive may wait up to {31 * miss_s:.1f} s for its poll, once, while each of them is "
+        "tried"
+    ) in result.stdout.splitlines()
+
+
 def test_the_shipped_demo_config_is_valid() -> None:
     result = _check(DEMO_CONFIG)
     assert result.returncode == 0, result.stderr
