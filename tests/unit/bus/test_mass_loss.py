@@ -85,13 +85,17 @@ def assert_served(b: Bench, on: Container[int], silent: int, since: float, **opt
 
     A round: ``silent`` misses and a poll of each drive still on, what round-robin would
     make each of them wait three times over. After the first, each drive still on is polled
-    at least once for every miss of as many silent drives as there are drives on.
+    at least once for every miss of as many silent drives as there are drives on, the
+    probes of the drives already given up taking their share of the line besides.
     """
     count = sum(1 for a in range(1, 127) if a in on)
     miss = miss_s(b, **options)
     one_round = silent * miss + count * POLL_S
     assert longest_wait(b, on, since - 5.0) <= one_round + 1e-9
-    assert longest_wait(b, on, since + one_round) <= count * (POLL_S + miss)
+    between = count * (POLL_S + miss) / (1.0 - b.plan.probe_share)
+    # Counted from one such wait after the first round: a drive found late in it may still
+    # be owed its first poll in between when the round ends.
+    assert longest_wait(b, on, since + one_round + between) <= between
 
 
 async def test_a_lone_drive_losing_power_leaves_the_round_as_it_was() -> None:
@@ -156,3 +160,14 @@ async def test_a_stop_during_the_streak_goes_out_next_and_is_carried_out() -> No
     assert not first.pcd1 & ControlWord.START
     assert after[0].at - asked_at < 0.2  # at most the exchange in flight before it
     assert not fc[4].running
+
+
+@pytest.mark.parametrize("after_s", [0.5 * i for i in range(8)])
+async def test_wherever_in_the_round_the_power_goes_no_drive_still_on_waits_longer(
+    after_s: float,
+) -> None:
+    # A round of this line takes 3.7 s: the loss at eight points of it. Trying the drives
+    # heard most recently first had made some wait 9 s where round-robin made them wait 6.
+    lost = range(17, 127)
+    b = await lose_power(lost, LOST_AT + after_s)
+    assert_served(b, ON, len(lost), LOST_AT + after_s)
