@@ -125,9 +125,17 @@ class Misses:
         self._passed.clear()
 
     def forget(self, kept: set[int]) -> None:
-        """Only the drives (by id) in ``kept`` are on the line now."""
+        """Only the drives (by id) in ``kept`` are on the line now (a reload).
+
+        A streak goes on: what it knows of the drives kept still holds, and ending it would
+        cost the drives still answering a second round of misses. A drive the reload adds
+        gets its one attempt in the probes' share, as at the line's opening (rotation).
+        """
         self.heard_at = {i: at for i, at in self.heard_at.items() if i in kept}
-        self.end()
+        self._tried = {i: at for i, at in self._tried.items() if i in kept}
+        self._tries = {i: n for i, n in self._tries.items() if i in kept}
+        self._passed &= kept
+        self._next_confirmed = 0  # the drives' places in the round may have changed
 
     def _confirmed(self, slot: DriveSlot) -> bool:
         since = self._since

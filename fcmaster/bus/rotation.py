@@ -131,7 +131,7 @@ class Rotation:
         poll = None
         if self._misses.active:
             poll = self._misses.choose(slots, now, lambda slot: self._pollable(slot, now))
-        if poll is None:
+        if poll is None:  # the round: _pollable written out, as it runs every transaction
             for offset in range(count):
                 slot = slots[(self._next_poll + offset) % count]
                 if slot.online is not False and slot.deaf_until <= now and id(slot) not in untried:

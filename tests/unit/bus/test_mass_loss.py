@@ -11,6 +11,8 @@ up after exactly ``offline_after`` misses each.
 
 from __future__ import annotations
 
+import asyncio
+import dataclasses
 import itertools
 from collections.abc import Container
 from typing import Any
@@ -171,3 +173,27 @@ async def test_wherever_in_the_round_the_power_goes_no_drive_still_on_waits_long
     lost = range(17, 127)
     b = await lose_power(lost, LOST_AT + after_s)
     assert_served(b, ON, len(lost), LOST_AT + after_s)
+
+
+async def test_a_reload_during_the_streak_keeps_serving_the_drives_still_on() -> None:
+    # SIGHUP while the silent drives are being given up: a drive added, the rest unchanged.
+    fc = [FcDrive(a) for a in range(1, 127)]
+    b = bench(*(DrivePlan(name=f"d{a}", address=a) for a in range(1, 126)), fc=fc)
+    lost = range(17, 127)
+    async with b.master:
+        await b.clock.run_until(LOST_AT)
+        for drive in fc[16:]:
+            drive.silent = True
+        await b.clock.run_until(LOST_AT + 8.0)  # the first round over, misses in between
+        plan = dataclasses.replace(
+            b.plan, drives=(*b.plan.drives, DrivePlan(name="d126", address=126))
+        )
+        await b.complete(asyncio.ensure_future(b.master.reconfigure(plan)))
+        reloaded_at = b.clock.now()
+        await b.clock.run_until(END)
+    miss = miss_s(b)
+    between = len(ON) * (POLL_S + miss) / (1.0 - b.plan.probe_share)
+    # Not a second first round: the streak goes on over the reload.
+    assert longest_wait(b, ON, reloaded_at - between) <= between
+    offline = {name: at for name, up, at in b.observer.availability if not up}
+    assert set(offline) == {f"d{a}" for a in lost}
