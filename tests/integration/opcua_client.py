@@ -38,12 +38,31 @@ def _write(file: Path, text: str) -> None:
 
 async def run_plan(plan: dict[str, Any], folder: Path) -> dict[str, Any]:
     """Run ``plan`` (see client.js) and return what the client reports."""
+    return await finished(await start_plan(plan, folder))
+
+
+async def start_plan(plan: dict[str, Any], folder: Path) -> asyncio.subprocess.Process:
+    """Start a client on ``plan``; :func:`finished` waits for its report."""
     file = folder / "plan.json"
     await asyncio.to_thread(_write, file, json.dumps(plan))
-    process = await asyncio.create_subprocess_exec(
+    return await asyncio.create_subprocess_exec(
         node_binary(), str(CLIENT / "client.js"), str(file),
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, cwd=CLIENT,
     )  # fmt: skip
+
+
+async def subscribed(process: asyncio.subprocess.Process) -> float:
+    """Wait for a ``count`` step's client to say it is subscribed; the seconds it took."""
+    assert process.stderr is not None
+    async with asyncio.timeout(RUN_S):
+        while line := (await process.stderr.readline()).decode():
+            if line.startswith("subscribed "):
+                return int(line.split()[1]) / 1000
+    raise AssertionError(f"the OPC UA client ended unsubscribed: {await finished(process)}")
+
+
+async def finished(process: asyncio.subprocess.Process) -> dict[str, Any]:
+    """What a started client reported, once it has ended."""
     out, err = await asyncio.wait_for(process.communicate(), RUN_S)
     lines = [line for line in out.decode().splitlines() if line.startswith("{")]
     assert lines, f"the OPC UA client printed no result:\n{out.decode()}\n{err.decode()}"
