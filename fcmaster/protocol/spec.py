@@ -105,7 +105,9 @@ class DiagnosisParameters:
     baudrate: str
     parity: str
     delay: str  # the drive's response delay setting
-    factory_delay_s: float  # that delay as the drives leave the factory
+    # that delay as the drives leave the factory; None where the protocol's drives have no
+    # one such delay (Modbus RTU: each make answers in its own time), so none is judged slow
+    factory_delay_s: float | None
 
 
 @dataclass(slots=True, frozen=True, kw_only=True)

@@ -320,6 +320,8 @@ def _slow(survey: Survey) -> list[Finding]:
     if turnaround_ms is None or found is None or "://" in survey.port:
         return []  # over a network the round trip is in it too: no measure of the line
     diagnosis = spec_for(found.protocol).diagnosis
+    if diagnosis.factory_delay_s is None:
+        return []  # no delay to compare with; a USB latency timer is judged on its own
     factory_ms = diagnosis.factory_delay_s * 1000.0
     if turnaround_ms - factory_ms < SLOW_BY_S * 1000.0:
         return []

@@ -50,8 +50,14 @@ def finding(report: dict[str, Any], code: str) -> dict[str, Any]:
          ("--protocol", "mitsubishi")),
         # No --protocol: FC and Mitsubishi are tried at every rate before ENC answers.
         (LineSettings(protocol="enc", baudrate=9600, parity="N"), ()),
+        # Answering 10 ms after a request is no fault of a Modbus drive: none is reported.
+        (LineSettings(protocol="modbus-rtu", baudrate=19200, parity="E"),
+         ("--protocol", "modbus-rtu")),
+        # No --protocol: FC, Mitsubishi and ENC are tried at every rate before Modbus RTU.
+        (LineSettings(protocol="modbus-rtu", baudrate=9600, parity="E"), ()),
     ],
-    ids=["danfoss-fc", "mitsubishi", "enc-found-without-protocol"],
+    ids=["danfoss-fc", "mitsubishi", "enc-found-without-protocol", "modbus-rtu",
+         "modbus-rtu-found-without-protocol"],
 )  # fmt: skip
 async def test_a_healthy_line_of_each_protocol(line: LineSettings, args: tuple[str, ...]) -> None:
     async with commissioning.served(line, TWO) as server:

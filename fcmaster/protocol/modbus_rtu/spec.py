@@ -104,7 +104,7 @@ SPEC: Final[ProtocolSpec[ModbusOptions]] = ProtocolSpec(
         baudrate="its baud rate parameter",
         parity="its parity parameter",
         delay="its response delay parameter",
-        factory_delay_s=0.0,
+        factory_delay_s=None,  # each make answers in its own time: 2 to over 20 ms
     ),
     link_type=250,  # pcapng RTAC_SERIAL: Wireshark decodes its payload as Modbus RTU
     simulator="fcmaster.sim.modbus_rtu.simulator:SIMULATOR",
