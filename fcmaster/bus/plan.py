@@ -113,6 +113,14 @@ class LinePlan:
         """
         return max(3.5 * self.char_s, 0.002)
 
+    def late_reply_s(self, reply_length: int) -> float:
+        """After a reply's deadline, how long a late reply may still keep the line busy."""
+        return self.wire_s(reply_length) + self.gap_s
+
+    def miss_s(self, request_length: int, reply_length: int) -> float:
+        """What an unanswered request costs the line: its deadline, then a late reply's time."""
+        return self.reply_timeout(request_length, reply_length) + self.late_reply_s(reply_length)
+
 
 def with_protocol_options(plan: LinePlan, pairs: OptionPairs) -> LinePlan:
     """``plan`` carrying a protocol's own line keys ``pairs``.

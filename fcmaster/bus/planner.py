@@ -382,7 +382,7 @@ class Planner:
         if slot is not None and not retried:
             kind = None if step.kind is StepKind.COMMAND else step.kind
             # After the deadline a late reply may still be arriving: the line is not free.
-            tail_s = self.plan.wire_s(step.exchange.reply_length) + self.plan.gap_s
+            tail_s = self.plan.late_reply_s(step.exchange.reply_length)
             self.rotation.failed(slot, kind, now, tail_s, report)
             for transition in report.transitions:  # several at once when the line fell silent
                 demoted = self._by_name[transition.drive.name]

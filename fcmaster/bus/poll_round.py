@@ -45,12 +45,7 @@ def stranded_s(plan: LinePlan) -> float:
     answers, the deadline follows them and is mostly shorter.
     """
     misses = [
-        max(
-            plan.reply_timeout(len(poll.request), poll.reply_length)
-            + plan.wire_s(poll.reply_length)
-            + plan.gap_s
-            for poll in polls
-        )
+        max(plan.miss_s(len(poll.request), poll.reply_length) for poll in polls)
         for polls in _polls(plan)
     ]
     return sum(misses) - min(misses) if misses else 0.0

@@ -37,11 +37,7 @@ def longest_probe_wait_s(plan: LinePlan) -> float:
         return 0.0
     codec = codec_for(plan)
     probe = codec.poll(plan.drives[0].address, None, None)
-    cost = (
-        plan.reply_timeout(len(probe.request), probe.reply_length)
-        + plan.wire_s(probe.reply_length)
-        + plan.gap_s
-    )
+    cost = plan.miss_s(len(probe.request), probe.reply_length)
     return probe_period_s(plan, max(0, len(plan.drives) - 1), cost)
 
 
