@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from fcmaster.bus.commands import Action, Command, CommandResult, Outcome
+from fcmaster.bus.intents import apply, current
 from fcmaster.bus.plan import DrivePlan
 from fcmaster.bus.steps import DriveSlot, result_of
 from fcmaster.errors import UsageError
@@ -67,12 +68,34 @@ def refusal(
             codec.control(0 if slot is None else slot.address, intent)
         except UsageError as exc:
             return result_of(Outcome.INVALID, str(exc))
+    if action.is_control:
+        for target in targets:
+            reason = beyond_profile(codec, target, command)
+            if reason:
+                return result_of(Outcome.INVALID, reason)
     if action in (Action.READ, Action.WRITE) and slot is not None:
         try:
             build_access(codec, slot, command)
         except UsageError as exc:
             return result_of(Outcome.INVALID, str(exc))
     return None
+
+
+def beyond_profile(codec: DriveCodec, slot: DriveSlot, command: Command) -> str:
+    """Why ``slot``'s drive cannot be told what ``command`` makes of it ("" if it can).
+
+    A Modbus drive's profile may lack a command (coast, jog) or a way to run in reverse; a
+    command that needs one is refused here, never found missing as it is sent. A direction
+    is checked as a run in it, since a stopped drive told to reverse runs so at its start.
+    """
+    intent = apply(current(slot), command)
+    try:
+        codec.control(slot.address, intent)
+        if intent.reverse:
+            codec.control(slot.address, ControlIntent(Motion.RUN, True, intent.reference_pct))
+    except UsageError as exc:
+        return f"{slot.name}: {exc}"
+    return ""
 
 
 def broadcast_refusal(codec: DriveCodec, command: Command) -> str:

@@ -40,8 +40,9 @@ def needs_learning(slot: DriveSlot | None, pending: Pending) -> bool:
 def learn(slot: DriveSlot, reply: Reply) -> None:
     """Keep what the drive is doing, for adoption.
 
-    Protocols that read status and output in separate transactions (Mitsubishi, ENC)
-    tell it over several replies.
+    Protocols that read status and output in separate transactions (Mitsubishi, ENC, some
+    Modbus profiles) tell it over several replies. The direction is the status's, or where
+    the status has none, a signed output's (a reading's magnitude alone never says it).
     """
     status = reply.status
     if status is not None:
@@ -55,8 +56,8 @@ def learn(slot: DriveSlot, reply: Reply) -> None:
         before = slot.output_hz
         slot.output_falling = None if before is None else abs(output) < before - FALLING_HZ
         slot.output_hz = abs(output)
-        if output and status is None:
-            slot.reverse = output < 0
+        if output and reply.output_signed and (status is None or status.reverse is None):
+            slot.reverse = output < 0  # the status does not say; a signed reading does
 
 
 def _unlearn(slot: DriveSlot) -> None:

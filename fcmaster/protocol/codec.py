@@ -123,6 +123,10 @@ class Reply:
     # The output frequency, negative while the reply says the motor turns in reverse (FC);
     # protocols that report percent of nominal convert with the drive's nominal frequency.
     output_frequency_hz: float | None = None
+    # Whether that frequency's sign is the direction. Where it is a magnitude (Mitsubishi's,
+    # ENC's, an unsigned Modbus register) a positive reading says nothing of the direction:
+    # taken for "forward", it would have a drive running in reverse adopted forward.
+    output_signed: bool = False
     value: ParameterValue | None = None
     conditions: ConditionReport | None = None
     error: DriveError | None = None  # the drive refused the request

@@ -243,7 +243,12 @@ class FcCodec:
         if exchange.access is Access.NONE:
             if telegram.pke is not None:
                 raise UnexpectedReply("parameter reply to a process telegram", raw=frame)
-            return Reply(address=exchange.address, status=status, output_frequency_hz=output_hz)
+            return Reply(
+                address=exchange.address,
+                status=status,
+                output_frequency_hz=output_hz,
+                output_signed=True,
+            )
         if telegram.pke is None or exchange.parameter is None:
             raise UnexpectedReply("process reply to a parameter telegram", raw=frame)
         ak = telegram.ak
@@ -253,6 +258,7 @@ class FcCodec:
                 address=exchange.address,
                 status=status,
                 output_frequency_hz=output_hz,
+                output_signed=True,
                 error=DriveError(code, error_text(code)),
             )
         if telegram.pnu != exchange.parameter.code:
@@ -271,6 +277,7 @@ class FcCodec:
             address=exchange.address,
             status=status,
             output_frequency_hz=output_hz,
+            output_signed=True,
             value=value,
             conditions=conditions,
         )

@@ -97,6 +97,7 @@ class ModbusCodec:
         self.nominal_hz = dict(nominal_hz or {})
         self.default = default
         self._commanded: dict[int, ControlIntent] = {}
+        self._running: dict[int, bool] = {}  # what each drive's last status said
         self._polls = PollCache(self._build_poll)
 
     def profile(self, address: int) -> DriveProfile:
@@ -217,6 +218,9 @@ class ModbusCodec:
                 and previous.motion is Motion.RUN
                 and previous.reverse == intent.reverse
                 and not intent.reset
+                # Commanded to run is not running: a drive stopped behind the gateway's back
+                # (a local stop, STO, a power cut) is walked through its sequence again.
+                and self._running.get(address, True)
             )
             if still_running:  # the state machine is where it should be: the reference only
                 return tuple(exchanges)
@@ -281,6 +285,8 @@ class ModbusCodec:
             raise UsageError(f"{parameter.name}: only numbers can be written to a register")
         profile = self._known(address)
         register = scaled(profile, key_register(parameter))
+        if profile is not None:
+            _not_a_command_register(profile, register)
         exchange = self._write(address, register, register.raw(value), parameter=parameter)
         if profile is not None and profile.pacing.after_write_s:
             exchange = dataclasses.replace(exchange, settle_s=profile.pacing.after_write_s)
@@ -309,7 +315,10 @@ class ModbusCodec:
                 )
             nominal = self.nominal_hz.get(exchange.address, DEFAULT_NOMINAL_HZ)
             profile = self._known(exchange.address)
-            return read_reply(exchange, request, response.values, profile, nominal)
+            reply = read_reply(exchange, request, response.values, profile, nominal)
+            if reply.status is not None:
+                self._running[exchange.address] = reply.status.running
+            return reply
         if response != _echo(request):
             raise UnexpectedReply("the write was not confirmed as sent", raw=frame)
         value = None
@@ -376,6 +385,24 @@ def _joint(profile: DriveProfile) -> bool:
     low = min(status.address, frequency.address)
     high = max(status.address + 1, frequency.address + frequency.words)
     return status.input == frequency.input and high - low <= _JOINT_SPAN
+
+
+def _not_a_command_register(profile: DriveProfile, register: Register) -> None:
+    """Refuse a parameter write to where the drive takes its commands (UsageError).
+
+    Its control word and reference are the command path's alone: written as a parameter, a
+    word would start the motor unaudited and a reference would pass the drive's configured
+    limits, which only commands are held to.
+    """
+    span = set(range(register.address, register.address + register.words))
+    for role, held in (("control word", profile.control), ("reference", profile.reference)):
+        taken = range(held.address, held.address + held.words)
+        if held.input == register.input and span.intersection(taken):
+            raise UsageError(
+                f"register {register.address} is {profile.name}'s {role}: "
+                + ("command the drive instead" if role == "control word" else
+                   "set it with set_reference, within the drive's configured limits")
+            )  # fmt: skip
 
 
 def _sequence(profile: DriveProfile, command: str) -> tuple[int, ...]:

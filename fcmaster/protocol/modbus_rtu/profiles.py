@@ -298,7 +298,10 @@ YASKAWA_MEMOBUS: Final = DriveProfile(
     state_machine=StateMachine.BITS,
     control=Register(address=0x0001),  # operation commands
     reference=Register(address=0x0002, scale=0.01, unit="Hz"),  # o1-03 = 0: 0.01 Hz
-    status=Register(address=0x002C),  # drive status 2
+    # U1-12 drive status, not 002CH (drive status 2): only it says the direction, and the
+    # output frequency (0024H) is a magnitude, so without it a drive found running in
+    # reverse could not be adopted as it runs
+    status=Register(address=0x004B),
     output_frequency=Register(address=0x0024, scale=0.01, unit="Hz"),
     fault_code=Register(address=0x0080),  # U2-01 current fault
     commands={
@@ -309,9 +312,10 @@ YASKAWA_MEMOBUS: Final = DriveProfile(
     },
     status_bits={
         "running": 0,  # during run
-        "at_reference": 2,  # speed agree
-        "ready": 6,  # drive ready
-        "fault": 14,
+        "reverse": 2,  # during reverse run
+        "at_reference": 4,  # during speed agree
+        "ready": 5,  # drive ready
+        "fault": 7,
     },
     faults={
         0x02: "Uv1 DC bus undervoltage",
@@ -352,8 +356,10 @@ YASKAWA_MEMOBUS: Final = DriveProfile(
     sources=(
         f"{_A1000} p. 559: 0001H operation commands (bit 0 forward run, bit 1 reverse run, "
         "bit 3 fault reset), 0002H frequency reference in o1-03 units",
-        f"{_A1000} p. 561: 002CH drive status 2 (bit 0 during run, bit 2 speed agree, bit 6 "
-        "drive ready, bit E fault, bit F communication timeout), 0031H DC bus voltage in 1 V",
+        "YASKAWA AC Drive A1000 Technical Manual SIEP C710616 27C p. 494: 004BH drive status "
+        "U1-12 (bit 0 during run, bit 2 during reverse run, bit 4 during speed agree, bit 5 "
+        "drive ready, bit 7 fault); the same register on V1000 and GA500 is unverified",
+        f"{_A1000} p. 561: 0031H DC bus voltage in 1 V",
         f"{_A1000} p. 494: 0080H-0097H fault trace monitors U2-",
         "YASKAWA HV600 Technical Reference SIEPYAIH6B01A p. 742, 746: broadcast to 00H gets "
         "no response; a parameter write needs the Enter command",

@@ -8,75 +8,34 @@ too soon goes unanswered (and is counted).
 
 from __future__ import annotations
 
-import random
-
 import pytest
 
-from fcmaster.bus.codecs import codec_for
 from fcmaster.bus.commands import Outcome
 from fcmaster.bus.master import BusMaster
-from fcmaster.bus.plan import DrivePlan, LinePlan
+from fcmaster.bus.plan import DrivePlan
 from fcmaster.protocol.modbus_rtu import WriteSingle, decode_request
 from fcmaster.protocol.modbus_rtu.profile import DriveProfile
 from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
-from fcmaster.sim.modbus_rtu.drive import ModbusSimDrive
-from fcmaster.sim.settings import DriveSettings, LineSettings
+from fcmaster.sim.settings import DriveSettings
 from tests.fakes import ScriptedTransport, Sent, Timed, VirtualClock
 from tests.orders import orders
 from tests.unit.bus.bench import T0
+from tests.unit.bus.modbus_line import SimLine, master_on, sim_line
 
 YASKAWA: DriveProfile = BUILT_IN["yaskawa-memobus"]
 ABB: DriveProfile = BUILT_IN["abb-drives"]
 WAIT_S = YASKAWA.pacing.after_write_s
 BAUDRATE = 115200  # an ABB poll takes less than the wait: several go meanwhile
-CHAR_S = 11 / BAUDRATE
 ACCEL = "hr512"  # C1-01 acceleration time (0200H)
-
-
-class SimLine:
-    """The simulated drives of a line, answering on a scripted wire."""
-
-    def __init__(self, clock: VirtualClock, *drives: ModbusSimDrive) -> None:
-        self.clock = clock
-        self.drives = {d.address: d for d in drives}
-
-    def __call__(self, request: bytes) -> bytes | Timed | None:
-        drive = self.drives.get(request[0])
-        if drive is None:
-            return None
-        ended = self.clock.now() + len(request) * CHAR_S
-        reply = drive.handle(request, ended)
-        if reply is None:
-            return None
-        return Timed(
-            ((len(request) * CHAR_S + drive.response_delay_s + len(reply) * CHAR_S, reply),)
-        )
-
-    @property
-    def unheard(self) -> int:
-        """Requests a drive did not hear, busy after a parameter write."""
-        return sum(d.unheard for d in self.drives.values())
 
 
 def _line(*drives: DrivePlan) -> tuple[VirtualClock, ScriptedTransport, BusMaster, SimLine]:
     clock = VirtualClock(T0)
-    plan = LinePlan(
-        name="line1", port="scripted", protocol="modbus-rtu", baudrate=BAUDRATE, drives=drives
-    )
-    sims = [
-        ModbusSimDrive(
-            d.address,
-            DriveSettings(profile=d.profile, parameters={ACCEL: 100}),
-            now=T0,
-            line=LineSettings(protocol="modbus-rtu", baudrate=BAUDRATE),
-        )
-        for d in drives
-    ]
-    line = SimLine(clock, *sims)
-    transport = ScriptedTransport(clock, line, char_s=CHAR_S)
-    master = BusMaster(
-        plan, codec=codec_for(plan), transport=transport, clock=clock, rng=random.Random(1)
-    )
+    settings = {
+        d.address: DriveSettings(profile=d.profile, parameters={ACCEL: 100}) for d in drives
+    }
+    line = sim_line(clock, BAUDRATE, *drives, settings=settings)
+    transport, master = master_on(line, BAUDRATE, *drives)
     return clock, transport, master, line
 
 
