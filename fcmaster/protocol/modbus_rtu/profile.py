@@ -246,6 +246,17 @@ def profile_problems(profile: DriveProfile) -> list[tuple[str, str]]:
     for name in REQUIRED_STATUS_BITS:
         if name not in profile.status_bits:
             problems.append((f"status_bits.{name}", "missing: confirmation needs it"))
+    reverses = "start_reverse" in profile.commands or profile.reference.signed
+    if reverses and "reverse" not in profile.status_bits and not profile.output_frequency.signed:
+        # A gateway restarted under a drive running in reverse would take it for forward,
+        # and its next command would turn the motor round.
+        problems.append(
+            (
+                "status_bits.reverse",
+                "missing: a drive that can run in reverse must tell it, by this bit or a "
+                "signed registers.output_frequency",
+            )
+        )
     for name, bit in profile.status_bits.items():
         if name not in STATUS_BITS:
             problems.append(

@@ -101,6 +101,17 @@ def test_a_state_machine_start_without_its_sequence_is_refused() -> None:
         checked(dataclasses.replace(abb, commands={**abb.commands, "start": (0x047F,)}))
 
 
+def test_a_profile_that_can_reverse_but_never_tells_the_direction_is_refused() -> None:
+    yaskawa = BUILT_IN["yaskawa-memobus"]  # a reverse run; its output frequency a magnitude
+    bits = {k: v for k, v in yaskawa.status_bits.items() if k != "reverse"}
+    blind = dataclasses.replace(yaskawa, status_bits=bits)
+    assert [path for path, _ in profile_problems(blind)] == ["status_bits.reverse"]
+    signed = Register(address=0x0024, scale=0.01, unit="Hz", signed=True)
+    assert profile_problems(dataclasses.replace(blind, output_frequency=signed)) == []
+    forward_only = {k: v for k, v in yaskawa.commands.items() if k != "start_reverse"}
+    assert profile_problems(dataclasses.replace(blind, commands=forward_only)) == []
+
+
 # ---------------------------------------------------------------- watchdogs and faults
 
 
