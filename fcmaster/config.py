@@ -318,7 +318,7 @@ def parse(
         if salvaged is not None:
             partial, renumber = salvaged
             more: list[tuple[str, str]] = []
-            _check(partial, more)
+            _check(partial, more, path)  # profile files beside the config, as in a good file
             problems += [(renumber(path), renumber(reason)) for path, reason in more]
     else:
         lines = _check(model, problems, path)

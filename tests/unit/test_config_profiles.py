@@ -114,3 +114,21 @@ def test_a_drive_without_a_monitor_list_watches_its_own_profiles_values() -> Non
     by_name = {d.name: d for d in line.drives}
     assert by_name["d1"].monitor == ("hr3204", "hr3207", "hr3209")
     assert by_name["d0"].monitor == ("hr106", "hr109", "hr110")
+
+
+def test_a_profile_file_is_found_beside_the_config_when_other_keys_are_broken(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The pass that checks the well-formed rest of a broken file reads profile files too:
+    # from the config's folder, not from wherever the command runs.
+    (tmp_path / "my-vfd.yaml").write_text(USER_PROFILE, encoding="utf-8")
+    text = config("modbus-rtu", "my-vfd.yaml").replace(
+        "    drives:\n",
+        "    drives:\n      - {name: d0, address: 2, profile: abb-drives, "
+        "nominal_frequency_hz: -1}\n",
+    )
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    found = problems(text, path=tmp_path / "fcmaster.yaml")
+    assert list(found) == ["buses[0].drives[0].nominal_frequency_hz"]
