@@ -132,3 +132,17 @@ def test_a_profile_file_is_found_beside_the_config_when_other_keys_are_broken(
     monkeypatch.chdir(elsewhere)
     found = problems(text, path=tmp_path / "fcmaster.yaml")
     assert list(found) == ["buses[0].drives[0].nominal_frequency_hz"]
+
+
+def test_a_watchdog_on_a_drive_whose_profile_names_no_watchdog_registers_is_refused(
+    tmp_path: Path,
+) -> None:
+    # Else `check` accepts it and the audit fails at run time: there is nowhere to write it.
+    start, end = USER_PROFILE.index("watchdog:"), USER_PROFILE.index("values:")
+    (tmp_path / "my-vfd.yaml").write_text(USER_PROFILE[:start] + USER_PROFILE[end:])
+    text = config("modbus-rtu", "my-vfd.yaml").replace(
+        "address: 1", "address: 1\n        control: bus\n        watchdog: {timeout_s: 1}"
+    )
+    found = problems(text, path=tmp_path / "fcmaster.yaml")
+    assert list(found) == ["buses[0].drives[0].watchdog"]
+    assert "names no watchdog registers" in found["buses[0].drives[0].watchdog"]
