@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from pydantic import (
-    BaseModel,
     Field,
     TypeAdapter,
     ValidationError,
@@ -54,6 +53,7 @@ from fcmaster.config_hints import in_words
 from fcmaster.config_modbus import check_modbus, modbus_units
 from fcmaster.config_opcua import check_opcua
 from fcmaster.config_profiles import drive_profile, profile_monitor
+from fcmaster.config_salvage import Dropped, mend
 from fcmaster.config_sections import (
     HttpModel,
     JournalModel,
@@ -316,10 +316,14 @@ def parse(
         # one bus does not hide an address out of range in another until it is fixed.
         salvaged = _salvage(data)
         if salvaged is not None:
-            partial, renumber = salvaged
+            partial, renumber, dropped = salvaged
             more: list[tuple[str, str]] = []
-            _check(partial, more)
-            problems += [(renumber(path), renumber(reason)) for path, reason in more]
+            _check(partial, more, path)  # profile files beside the config, as in a good file
+            problems += [
+                (renumber(where), renumber(reason))
+                for where, reason in more
+                if dropped.believed(where)
+            ]
     else:
         lines = _check(model, problems, path)
     if unset:  # what an unset variable left empty is not a problem of its own
@@ -334,29 +338,44 @@ def parse(
 _DRIVE_PATH = re.compile(r"\bbuses\[(\d+)\](?:\.drives\[(\d+)\])?")
 
 
-def _salvage(data: dict[str, Any]) -> tuple[ConfigModel, Callable[[str], str]] | None:
+def _salvage(data: dict[str, Any]) -> tuple[ConfigModel, Callable[[str], str], Dropped] | None:
     """The well-formed parts of a file that failed validation, and where they came from.
 
-    The function maps a key path in the parts back to the file's own (the buses and drives
-    kept are renumbered).
+    A bus or drive with wrong keys is kept without them (:func:`.config_salvage.mend`);
+    :class:`.config_salvage.Dropped` says which, so that no check of a key left out is
+    believed. The function maps a key path in the parts back to the file's own (the buses
+    and drives kept are renumbered).
     """
     buses = data.get("buses")
     if not isinstance(buses, list):
         return None
     kept: list[BusModel] = []
     where: list[tuple[int, list[int]]] = []  # per kept bus: its index, its drives' indices
+    dropped = Dropped()
     for b, bus in enumerate(buses):
         if not isinstance(bus, dict):
             continue
         drives = bus.get("drives", [])
         if not isinstance(drives, list):
             drives = []  # reported already: the bus's other keys can still be checked
-        good = [d for d, drive in enumerate(drives) if _valid(DriveModel, drive)]
+        good: list[int] = []
+        mended: list[DriveModel] = []
+        left_out: list[frozenset[str]] = []
+        for d, drive in enumerate(drives):
+            if (fixed := mend(DriveModel, drive, drive=True)) is not None:
+                good.append(d)
+                mended.append(fixed[0])
+                left_out.append(fixed[1])
         try:
-            kept.append(BusModel.model_validate({**bus, "drives": [drives[d] for d in good]}))
-        except (ValidationError, TypeError):
+            fixed_bus = mend(BusModel, {**bus, "drives": mended}, drive=False)
+        except TypeError:
             continue
+        if fixed_bus is None:
+            continue
+        kept.append(fixed_bus[0])
         where.append((b, good))
+        moot = _addresses_depend(fixed_bus[0], fixed_bus[1])
+        dropped.add_bus(fixed_bus[0], fixed_bus[1], left_out, addresses_moot=moot)
     sections: dict[str, Any] = {}
     for name, field in ConfigModel.model_fields.items():
         if name != "buses" and name in data:
@@ -374,15 +393,30 @@ def _salvage(data: dict[str, Any]) -> tuple[ConfigModel, Callable[[str], str]] |
     def renumber(text: str) -> str:
         return _DRIVE_PATH.sub(original, text)
 
-    return partial, renumber
+    return partial, renumber, dropped
 
 
-def _valid(model: type[BaseModel], value: Any) -> bool:
+def _addresses_depend(bus: BusModel, left_out: frozenset[str]) -> bool:
+    """Whether ``bus``'s address range could differ had the keys ``left_out`` been written.
+
+    Danfoss's address_format does change it, the Modbus line's profile does not: each value
+    the key may take is tried.
+    """
+    if "protocol" in left_out:
+        return True
     try:
-        model.model_validate(value)
-    except ValidationError:
-        return False
-    return True
+        addresses = codec_for(_line(bus, ())).addresses
+        for key, spec in line_keys():
+            if spec.name != bus.protocol or key.name not in left_out:
+                continue
+            values = key.choices or (key.minimum, key.maximum)
+            for value in (*values, None) if key.nullable else values:
+                other = bus.model_copy(update={key.name: value})
+                if codec_for(_line(other, ())).addresses != addresses:
+                    return True
+    except (UsageError, ValueError):  # a value no codec takes: nothing is known
+        return True
+    return False
 
 
 def _check(

@@ -40,7 +40,8 @@ def watchdog_plan(
         return None
     # The protocol's facts for any line: where they depend on a line key (Mitsubishi's
     # drive_port: Pr.122 or Pr.336), only the parameter differs, not the actions or range.
-    facts = spec_for(protocol).drive_watchdog(None, profile)
+    spec = spec_for(protocol)
+    facts = spec.drive_watchdog(None, profile)
     action = wanted.action or facts.actions[0]
     found = len(problems)
     if control != "bus":
@@ -60,6 +61,14 @@ def watchdog_plan(
             check_timeout(facts, wanted.timeout_s, action)
         except UsageError as exc:
             problems.append((f"{at}.watchdog.timeout_s", str(exc)))
+        # Where the drive's own facts come from its profile (modbus-rtu), one without
+        # watchdog registers has nowhere to write it: refused here, not by the audit at run
+        # time. A drive whose profile is missing has that problem named already.
+        if len(problems) == found and (profile is not None or spec.watchdog_of_profile is None):
+            try:
+                facts.encode(wanted.timeout_s, action)
+            except UsageError as exc:
+                problems.append((f"{at}.watchdog", str(exc)))
     return WatchdogPlan(wanted.timeout_s, action) if len(problems) == found else None
 
 

@@ -203,6 +203,11 @@ class WatchdogAudit:
         if facts is None:  # pragma: no cover - every protocol has its facts
             self._finish(drive, None, f"no watchdog facts for {self.plan.protocol}")
             return
+        if not facts.parameters:
+            # Nothing to read (a Modbus drive whose profile names no watchdog registers):
+            # whether the motor stops when the gateway dies is not known, which is not "off".
+            self._finish(drive, None, "no watchdog parameters are known for this drive")
+            return
         values, problem = await self._access.read(drive, facts)
         if values is None and problem is None:
             return  # the line went down or shut: the next time online audits again

@@ -281,6 +281,9 @@ def test_problems_in_several_buses_and_sections_are_reported_in_one_pass() -> No
         "buses[1].drives[0].address": "200 is outside 1-126",
         "buses[1].drives[2].name": "drive name 'fan-1' is already used at buses[1].drives[0].name",
         "buses[1].drives[2].monitor[0]": problems["buses[1].drives[2].monitor[0]"],
+        # sl/ash's wrong baudrate no longer hides the rest of that bus
+        "buses[2].name": problems["buses[2].name"],
+        "buses[2].drives[0].min_frequency_hz": "60.0 is above the maximum 50.0",
         "buses[3].drives[0].address": "0 is outside 1-126",
         "http.listen": (
             "0.0.0.0:8080 is not a loopback address: with no http.tokens the API is read-only "
@@ -288,6 +291,7 @@ def test_problems_in_several_buses_and_sections_are_reported_in_one_pass() -> No
         ),
     }
     assert "bogus" in problems["buses[1].drives[2].monitor[0]"]
+    assert "cannot be addressed over HTTP and MQTT" in problems["buses[2].name"]
 
 
 def test_a_simulation_section_run_would_refuse_is_refused_by_the_check() -> None:
@@ -320,3 +324,68 @@ def test_odd_shapes_are_reported_with_the_meaning_of_the_rest(buses: str) -> Non
     paths = [path for path, _ in caught.value.problems]
     assert len(paths) == 2
     assert any(path.endswith(".address") for path in paths)
+
+
+def _problem_keys(text: str) -> list[str]:
+    with pytest.raises(ConfigError) as caught:
+        parse(text)
+    return [where for where, _ in caught.value.problems]
+
+
+def test_a_wrong_key_hides_none_of_the_other_problems_of_its_bus_or_drive() -> None:
+    text = textwrap.dedent(
+        """\
+        buses:
+          - name: mb
+            port: /dev/ttyUSB0
+            protocol: modbus-rtu
+            profile: abb-drive
+            baudrate: 19000
+            drives:
+              - {name: y, address: 248, profile: abb-drives}
+          - name: fc
+            port: /dev/ttyUSB1
+            baudrate: 19000
+            drives:
+              - {name: z, address: 300, nominal_frequency_hz: -5}
+              - {name: z, address: 2, watchdog: {timeout_s: 2, when: now}}
+              - {name: w, address: 2}
+        """
+    )
+    assert sorted(_problem_keys(text)) == [
+        "buses[0].baudrate",
+        "buses[0].drives[0].address",
+        "buses[0].profile",
+        "buses[1].baudrate",
+        "buses[1].drives[0].address",
+        "buses[1].drives[0].nominal_frequency_hz",
+        "buses[1].drives[1].name",  # z again
+        "buses[1].drives[1].watchdog.when",
+        "buses[1].drives[2].address",  # 2 again
+    ]
+
+
+@pytest.mark.parametrize(
+    ("bus", "wrong"),
+    [
+        ("drives: [{name: d, address: 1, max_frequency_hz: x, min_frequency_hz: 55}]",
+         "drives[0].max_frequency_hz"),
+        ("protocol: modbus, drives: [{name: d, address: 200}]", "protocol"),
+        ("protocol: modbus-rtu, profile: abb-drive, drives: [{name: d, address: 3}]", "profile"),
+        ("address_format: 32, drives: [{name: d, address: 100}]", "address_format"),
+        ("drives: [{name: d, address: 1, control: bux, watchdog: {timeout_s: 2}}]",
+         "drives[0].control"),
+        ("baudrate: 9601, drives: [{name: d, address: 1, monitor: 5, control: bus, "
+         "watchdog: {timeout_s: 0.1}}]", "drives[0].monitor baudrate"),
+        ("drives: [{name: d, address: one}, {name: e, address: 2, control: bus, "
+         "watchdog: {timeout_s: 0.1}}]", "drives[0].address"),
+        ("drives: [{address: 1}, {name: '', address: 2}]", "drives[0].name drives[1].name"),
+    ],
+    ids=["maximum", "protocol", "line-profile", "address-format", "control", "monitor",
+         "address", "names"],
+)  # fmt: skip
+def test_a_key_left_out_of_a_broken_bus_or_drive_invents_no_problem(bus: str, wrong: str) -> None:
+    # Left out, the key stands at its default: what its checks would say of that is not
+    # the user's problem (55 Hz above a default maximum, 200 beyond a default protocol's).
+    keys = _problem_keys(f"buses: [{{name: a, port: /dev/ttyUSB0, {bus}}}]")
+    assert keys == [f"buses[0].{key}" for key in wrong.split()]

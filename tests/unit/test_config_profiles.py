@@ -114,3 +114,35 @@ def test_a_drive_without_a_monitor_list_watches_its_own_profiles_values() -> Non
     by_name = {d.name: d for d in line.drives}
     assert by_name["d1"].monitor == ("hr3204", "hr3207", "hr3209")
     assert by_name["d0"].monitor == ("hr106", "hr109", "hr110")
+
+
+def test_a_profile_file_is_found_beside_the_config_when_other_keys_are_broken(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The pass that checks the well-formed rest of a broken file reads profile files too:
+    # from the config's folder, not from wherever the command runs.
+    (tmp_path / "my-vfd.yaml").write_text(USER_PROFILE, encoding="utf-8")
+    text = config("modbus-rtu", "my-vfd.yaml").replace(
+        "    drives:\n",
+        "    drives:\n      - {name: d0, address: 2, profile: abb-drives, "
+        "nominal_frequency_hz: -1}\n",
+    )
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    found = problems(text, path=tmp_path / "fcmaster.yaml")
+    assert list(found) == ["buses[0].drives[0].nominal_frequency_hz"]
+
+
+def test_a_watchdog_on_a_drive_whose_profile_names_no_watchdog_registers_is_refused(
+    tmp_path: Path,
+) -> None:
+    # Else `check` accepts it and the audit fails at run time: there is nowhere to write it.
+    start, end = USER_PROFILE.index("watchdog:"), USER_PROFILE.index("values:")
+    (tmp_path / "my-vfd.yaml").write_text(USER_PROFILE[:start] + USER_PROFILE[end:])
+    text = config("modbus-rtu", "my-vfd.yaml").replace(
+        "address: 1", "address: 1\n        control: bus\n        watchdog: {timeout_s: 1}"
+    )
+    found = problems(text, path=tmp_path / "fcmaster.yaml")
+    assert list(found) == ["buses[0].drives[0].watchdog"]
+    assert "names no watchdog registers" in found["buses[0].drives[0].watchdog"]

@@ -22,7 +22,11 @@ def _decode(values: Sequence[float]) -> WatchdogSetting:
 
 
 def _encode(timeout_s: float, action: str) -> tuple[tuple[str, float], ...]:
-    raise UsageError("a Modbus drive's watchdog is set through its profile's registers")
+    # Only a drive whose profile has no watchdog registers gets these facts (profile_facts).
+    raise UsageError(
+        "the drive's profile names no watchdog registers (no watchdog: timeout in it), and a "
+        "Modbus drive's watchdog is set through them"
+    )
 
 
 def _advice(timeout_s: float) -> str:

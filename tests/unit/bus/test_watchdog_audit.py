@@ -7,6 +7,7 @@ wrapped by a :class:`WatchdogAudit`. FC 8-03 travels as a Uint32 in 0.1 s (raw 6
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 import itertools
 import random
@@ -15,12 +16,15 @@ from typing import Any
 import pytest
 import structlog.testing
 
+from fcmaster.bus.commands import Command, CommandResult, Outcome
 from fcmaster.bus.master import BusMaster
 from fcmaster.bus.plan import DrivePlan, LinePlan, WatchdogPlan
 from fcmaster.bus.poll_round import poll_round_s
 from fcmaster.bus.watchdog import Verdict, WatchdogAudit, WatchdogReport, judge
 from fcmaster.protocol.danfoss_fc import RequestAk, ResponseAk, decode_telegram, make_pke
 from fcmaster.protocol.danfoss_fc.codec import FcCodec
+from fcmaster.protocol.modbus_rtu.profile import WatchdogProfile
+from fcmaster.protocol.modbus_rtu.profiles import BUILT_IN
 from fcmaster.protocol.watchdog import WatchdogSetting
 from tests.fakes import Responder, ScriptedTransport, Timed, VirtualClock
 from tests.unit.bus.bench import DELAY_S, T0, Bench, Recorder, reply_frame
@@ -455,3 +459,27 @@ async def test_a_drive_powered_up_late_is_judged_by_the_first_telegram_it_was_se
     assert report.restart_gap_s is not None
     assert report.restart_gap_s < 0.1
     assert (name, report.verdict) == ("a", Verdict.OK)
+
+
+async def test_a_modbus_drive_whose_profile_names_no_watchdog_registers_is_unknown() -> None:
+    # Nothing is read, so nothing says whether the motor stops if the gateway dies: unknown,
+    # not off (which would warn that it keeps running).
+    profile = dataclasses.replace(BUILT_IN["abb-drives"], watchdog=WatchdogProfile())
+    a = DrivePlan(name="a", address=1, control=True, profile=profile)
+    plan = LinePlan(name="line1", port="x", protocol="modbus-rtu", drives=(a,))
+    reports: list[WatchdogReport] = []
+    audit = WatchdogAudit(plan, clock=VirtualClock(T0), report=lambda _b, _n, r: reports.append(r))
+    commands: list[Command] = []
+
+    async def execute(name: str, command: Command) -> CommandResult:
+        commands.append(command)
+        return CommandResult(outcome=Outcome.REFUSED, reason="not expected")
+
+    audit.attach(execute)
+    with structlog.testing.capture_logs() as logs:
+        audit.drive_online(a, T0)
+        await asyncio.sleep(0)  # the audit's task runs: it has nothing to wait for
+        await audit.aclose()
+    assert commands == []
+    assert reports == [WatchdogReport(None, "unknown", Verdict.UNKNOWN, 0.0)]
+    assert [e["event"] for e in logs] == ["drive.watchdog_unknown"]
