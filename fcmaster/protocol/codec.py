@@ -123,6 +123,10 @@ class Reply:
     # The output frequency, negative while the reply says the motor turns in reverse (FC);
     # protocols that report percent of nominal convert with the drive's nominal frequency.
     output_frequency_hz: float | None = None
+    # Whether that frequency is a signed reading whose sign is the direction (a signed
+    # Modbus register); False for a magnitude, which says nothing of the direction. FC
+    # puts its sign into ``status.reverse`` itself.
+    output_frequency_signed: bool = False
     value: ParameterValue | None = None
     conditions: ConditionReport | None = None
     error: DriveError | None = None  # the drive refused the request

@@ -69,6 +69,7 @@ def read_reply(
         address=exchange.address,
         status=status,
         output_frequency_hz=frequency,
+        output_frequency_signed=profile.output_frequency.signed,
         conditions=conditions,
         value=value,
     )

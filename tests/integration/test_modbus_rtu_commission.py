@@ -1,0 +1,62 @@
+"""The commissioning commands (`scan`, `status`, `read`, `control`) on a Modbus RTU line.
+
+Each command runs as its own `python -m fcmaster` process against simulated drives of
+several families served on a pseudo-terminal by the test's event loop, as a technician
+would run them against a real line.
+"""
+
+from __future__ import annotations
+
+import json
+from contextlib import AbstractAsyncContextManager
+
+from fcmaster.sim import DriveSettings, LineSettings, PtyServer
+from tests.integration import commissioning
+
+LINE = LineSettings(protocol="modbus-rtu", baudrate=19200, parity="E")
+PROFILES = {1: "abb-drives", 2: "sinamics-v20", 4: "yaskawa-memobus"}
+INSTANT = {"ramp_up_s": 0.0, "ramp_down_s": 0.0}  # at the reference by the next request
+
+
+def served() -> AbstractAsyncContextManager[PtyServer]:
+    return commissioning.served(
+        LINE, [(a, DriveSettings(profile=p, parameters=INSTANT)) for a, p in PROFILES.items()]
+    )
+
+
+async def fcmaster(server: PtyServer, address: int, *args: str) -> tuple[int, str, str]:
+    """``fcmaster args[0] --port PTY --protocol modbus-rtu --profile P --address N args[1:]``."""
+    return await commissioning.fcmaster(
+        server, "modbus-rtu", args[0], "--profile", PROFILES[address],
+        "--address", str(address), *args[1:],
+    )  # fmt: skip
+
+
+async def run_in_reverse(server: PtyServer, address: int) -> None:
+    """Start the drive at 20 Hz and reverse it: it turns at -20 Hz from its next request."""
+    for action in (("start", "--frequency", "20"), ("reverse",)):
+        code, _, err = await fcmaster(server, address, "control", *action)
+        assert code == 0, err
+
+
+async def test_status_of_a_drive_without_a_reverse_bit_tells_the_direction_by_the_sign() -> None:
+    async with served() as server:
+        await run_in_reverse(server, 2)  # a V20: its status word has no reverse bit
+        code, out, err = await fcmaster(server, 2, "read", "hr23", "--json")
+        assert code == 0, err
+        assert json.loads(out)["value"] == -20.0  # r0024, signed
+        code, out, err = await fcmaster(server, 2, "status", "--json")
+    assert code == 0, err
+    state = json.loads(out)
+    assert (state["direction"], state["output_frequency_hz"]) == ("reverse", 20.0)
+
+
+async def test_a_drive_with_an_unsigned_frequency_register_reads_it_in_reverse() -> None:
+    async with served() as server:
+        await run_in_reverse(server, 4)  # a Yaskawa: 0024H holds the magnitude
+        code, out, err = await fcmaster(server, 4, "read", "hr36", "--json")
+        assert code == 0, err
+        assert json.loads(out)["value"] == 20.0
+        code, out, err = await fcmaster(server, 4, "status", "--json")  # still answering
+    assert code == 0, err
+    assert json.loads(out)["running"] is True
