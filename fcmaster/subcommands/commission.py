@@ -173,7 +173,18 @@ def _print_found(
     if as_json:
         print(json.dumps(found, indent=2), flush=True)
     elif found:
+        spec = spec_for(options.protocol)
+        # Without a profile a Modbus drive is only asked whether it is there (a read of
+        # register 0, which some refuse), never for its status.
+        unprofiled = spec.new_profiled_codec is not None and not _line_profile(options)
         for entry in found:
+            if entry["refused"] is not None and not unprofiled:  # another family's drive
+                refused = entry["refused"]
+                print(
+                    f"{entry['address']:>4}  answers, but refused the status read "
+                    f"({refused['text']}, code {refused['code']})"
+                )
+                continue
             if entry["status_word"] is None:  # it answers, but no status word was read
                 print(f"{entry['address']:>4}  answers (no status read: it needs a profile)")
                 continue
@@ -185,6 +196,11 @@ def _print_found(
         print(f"no drive answered on {options.port} ({tried} addresses tried)")
         _print_hint(options)
     sys.stdout.flush()
+
+
+def _line_profile(options: LineOptions) -> object:
+    """The drive profile given for the line (``--profile``), None where none was."""
+    return dict(spec_for(options.protocol).option_pairs(options)).get("profile")
 
 
 def _print_hint(options: LineOptions) -> None:
@@ -211,14 +227,17 @@ def _progress(done: int, total: int, address: int, found: int) -> None:
 
 def _summary(address: int, reply: Reply) -> dict[str, Any]:
     status, hz = reply.status, reply.output_frequency_hz  # of a drive at the default nominal
+    error = reply.error
     return {
         "address": address,
         "status_word": status.word if status else None,
-        "running": bool(status and status.running),
-        "fault": bool(status and status.fault),
-        "warning": bool(status and status.warning),
+        # not known without a status word (a drive that answers only to say no)
+        "running": status.running if status else None,
+        "fault": status.fault if status else None,
+        "warning": status.warning if status else None,
         "output_pct": None if hz is None else hz_to_pct(hz, DEFAULT_NOMINAL_HZ),
         "output_frequency_hz": hz,
+        "refused": None if error is None else {"code": error.code, "text": error.text},
     }
 
 

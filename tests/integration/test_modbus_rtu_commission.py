@@ -60,3 +60,29 @@ async def test_a_drive_with_an_unsigned_frequency_register_reads_it_in_reverse()
         code, out, err = await fcmaster(server, 4, "status", "--json")  # still answering
     assert code == 0, err
     assert json.loads(out)["running"] is True
+
+
+async def test_scan_with_a_profile_says_which_drives_refused_its_status_read() -> None:
+    scan = ("scan", "--profile", "abb-drives", "--addresses", "1-4")
+    async with served() as server:
+        code, out, err = await commissioning.fcmaster(server, "modbus-rtu", *scan)
+        assert code == 0, err
+        rows = {int(row.split()[0]): row for row in out.splitlines()}
+        code, out, err = await commissioning.fcmaster(server, "modbus-rtu", *scan, "--json")
+        assert code == 0, err
+        # without a profile, only presence is asked (register 0, which the Yaskawa lacks)
+        unprofiled = ("scan", "--addresses", "1-4")
+        code, bare, err = await commissioning.fcmaster(server, "modbus-rtu", *unprofiled)
+    assert code == 0, err
+    assert [row.split(None, 1)[1] for row in bare.splitlines()] == [
+        "answers (no status read: it needs a profile)"
+    ] * 3
+    assert sorted(rows) == [1, 2, 4]
+    assert "status 0x" in rows[1]
+    for address in (2, 4):  # another family's drive: no register 400004 (exception 02)
+        assert "answers, but refused the status read" in rows[address]
+        assert "needs a profile" not in rows[address]
+    found = {entry["address"]: entry for entry in json.loads(out)}
+    assert found[1]["running"] is False
+    assert [found[a]["running"] for a in (2, 4)] == [None, None]
+    assert [found[a]["status_word"] for a in (2, 4)] == [None, None]
