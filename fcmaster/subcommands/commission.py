@@ -26,6 +26,7 @@ import json
 import math
 import sys
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
@@ -35,6 +36,7 @@ from fcmaster.bus.master import BusMaster, BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, with_protocol_options
 from fcmaster.bus.stats import DriveStats
 from fcmaster.clock import MonotonicClock
+from fcmaster.config_profiles import drive_profile
 from fcmaster.config_values import baudrate_problem, port_url_problem
 from fcmaster.errors import BusError, CommandError, UsageError
 from fcmaster.protocol.codec import DriveCodec, Reply
@@ -400,7 +402,7 @@ async def control(
         if verb in (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE):
             print(
                 "note: fcmaster no longer feeds this drive's control-word watchdog; the drive "
-                "does what its timeout function (FC 8-03/8-04, ENC F2.16, Mitsubishi Pr.122) says",
+                f"does what {_watchdog_words(options, plan)} says",
                 file=sys.stderr,
             )
         return 0
@@ -410,6 +412,20 @@ async def control(
         exc.args = (f"{action}: {exc}",)  # the same error, its other fields kept
         raise
     return 1  # pragma: no cover - raise_for_outcome raises for every other outcome
+
+
+def _watchdog_words(options: LineOptions, plan: LinePlan) -> str:
+    """The drive's own watchdog settings on this line, named as its manual or profile does."""
+    named = _line_profile(options)  # modbus-rtu: each family keeps it in its own registers
+    profile = None
+    if named is not None:
+        profile = drive_profile(plan.protocol, str(named), Path.cwd(), "--profile", [])
+    names = spec_for(plan.protocol).drive_watchdog(plan, profile).parameters
+    if not names:
+        return "its communication watchdog (set in registers its drive profile names)"
+    if named is not None:
+        return f"its communication watchdog ({named} registers {', '.join(names)})"
+    return f"its timeout function ({'/'.join(names)})"
 
 
 def _check_magnitudes(

@@ -32,11 +32,17 @@ async def fcmaster(server: PtyServer, address: int, *args: str) -> tuple[int, st
     )  # fmt: skip
 
 
-async def run_in_reverse(server: PtyServer, address: int) -> None:
-    """Start the drive at 20 Hz and reverse it: it turns at -20 Hz from its next request."""
+async def run_in_reverse(server: PtyServer, address: int) -> str:
+    """Start the drive at 20 Hz and reverse it: it turns at -20 Hz from its next request.
+
+    What the start printed on stderr.
+    """
+    said = []
     for action in (("start", "--frequency", "20"), ("reverse",)):
         code, _, err = await fcmaster(server, address, "control", *action)
         assert code == 0, err
+        said.append(err)
+    return said[0]
 
 
 async def test_status_of_a_drive_without_a_reverse_bit_tells_the_direction_by_the_sign() -> None:
@@ -53,7 +59,10 @@ async def test_status_of_a_drive_without_a_reverse_bit_tells_the_direction_by_th
 
 async def test_a_drive_with_an_unsigned_frequency_register_reads_it_in_reverse() -> None:
     async with served() as server:
-        await run_in_reverse(server, 4)  # a Yaskawa: 0024H holds the magnitude
+        note = await run_in_reverse(server, 4)  # a Yaskawa: 0024H holds the magnitude
+        # its watchdog is H5-09/H5-04/H5-05, not another protocol's parameters
+        assert "yaskawa-memobus registers hr1077, hr1064, hr1065" in note
+        assert "8-03" not in note
         code, out, err = await fcmaster(server, 4, "read", "hr36", "--json")
         assert code == 0, err
         assert json.loads(out)["value"] == 20.0
