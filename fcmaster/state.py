@@ -329,12 +329,18 @@ class FleetState:
                 at_reference=status.at_reference,
                 status_word=status.word,
             )
-            if status.reverse is not None:
-                changes["direction"] = "reverse" if status.reverse else "forward"
-            elif commanded is not None:
+        hz = reply.output_frequency_hz
+        if status is not None and status.reverse is not None:
+            changes["direction"] = "reverse" if status.reverse else "forward"
+        elif commanded is not None:
+            if status is not None:
                 changes["direction"] = "reverse" if commanded.reverse else "forward"
-        if reply.output_frequency_hz is not None:
-            changes["output_frequency_hz"] = abs(reply.output_frequency_hz)
+        elif hz and reply.output_signed:
+            # A status word without a reverse bit, nothing commanded: a signed frequency's
+            # sign is the direction (a magnitude, or 0 Hz, says nothing of it).
+            changes["direction"] = "reverse" if hz < 0 else "forward"
+        if hz is not None:
+            changes["output_frequency_hz"] = abs(hz)
         value, report, read, measured = reply.value, reply.conditions, None, None
         monitored = self._monitored[key]
         if value is not None and (monitored is None or value.parameter.name in monitored):

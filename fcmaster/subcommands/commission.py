@@ -26,6 +26,7 @@ import json
 import math
 import sys
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 from fcmaster.bus.codecs import codec_for, with_protocol_delay
@@ -35,6 +36,7 @@ from fcmaster.bus.master import BusMaster, BusObserver
 from fcmaster.bus.plan import DrivePlan, LinePlan, with_protocol_options
 from fcmaster.bus.stats import DriveStats
 from fcmaster.clock import MonotonicClock
+from fcmaster.config_profiles import drive_profile
 from fcmaster.config_values import baudrate_problem, port_url_problem
 from fcmaster.errors import BusError, CommandError, UsageError
 from fcmaster.protocol.codec import DriveCodec, Reply
@@ -173,7 +175,18 @@ def _print_found(
     if as_json:
         print(json.dumps(found, indent=2), flush=True)
     elif found:
+        spec = spec_for(options.protocol)
+        # Without a profile a Modbus drive is only asked whether it is there (a read of
+        # register 0, which some refuse), never for its status.
+        unprofiled = spec.new_profiled_codec is not None and not _line_profile(options)
         for entry in found:
+            if entry["refused"] is not None and not unprofiled:  # another family's drive
+                refused = entry["refused"]
+                print(
+                    f"{entry['address']:>4}  answers, but refused the status read "
+                    f"({refused['text']}, code {refused['code']})"
+                )
+                continue
             if entry["status_word"] is None:  # it answers, but no status word was read
                 print(f"{entry['address']:>4}  answers (no status read: it needs a profile)")
                 continue
@@ -185,6 +198,11 @@ def _print_found(
         print(f"no drive answered on {options.port} ({tried} addresses tried)")
         _print_hint(options)
     sys.stdout.flush()
+
+
+def _line_profile(options: LineOptions) -> object:
+    """The drive profile given for the line (``--profile``), None where none was."""
+    return dict(spec_for(options.protocol).option_pairs(options)).get("profile")
 
 
 def _print_hint(options: LineOptions) -> None:
@@ -211,14 +229,17 @@ def _progress(done: int, total: int, address: int, found: int) -> None:
 
 def _summary(address: int, reply: Reply) -> dict[str, Any]:
     status, hz = reply.status, reply.output_frequency_hz  # of a drive at the default nominal
+    error = reply.error
     return {
         "address": address,
         "status_word": status.word if status else None,
-        "running": bool(status and status.running),
-        "fault": bool(status and status.fault),
-        "warning": bool(status and status.warning),
+        # not known without a status word (a drive that answers only to say no)
+        "running": status.running if status else None,
+        "fault": status.fault if status else None,
+        "warning": status.warning if status else None,
         "output_pct": None if hz is None else hz_to_pct(hz, DEFAULT_NOMINAL_HZ),
         "output_frequency_hz": hz,
+        "refused": None if error is None else {"code": error.code, "text": error.text},
     }
 
 
@@ -381,7 +402,7 @@ async def control(
         if verb in (Action.START, Action.JOG, Action.FORWARD, Action.REVERSE):
             print(
                 "note: fcmaster no longer feeds this drive's control-word watchdog; the drive "
-                "does what its timeout function (FC 8-03/8-04, ENC F2.16, Mitsubishi Pr.122) says",
+                f"does what {_watchdog_words(options, plan)} says",
                 file=sys.stderr,
             )
         return 0
@@ -391,6 +412,20 @@ async def control(
         exc.args = (f"{action}: {exc}",)  # the same error, its other fields kept
         raise
     return 1  # pragma: no cover - raise_for_outcome raises for every other outcome
+
+
+def _watchdog_words(options: LineOptions, plan: LinePlan) -> str:
+    """The drive's own watchdog settings on this line, named as its manual or profile does."""
+    named = _line_profile(options)  # modbus-rtu: each family keeps it in its own registers
+    profile = None
+    if named is not None:
+        profile = drive_profile(plan.protocol, str(named), Path.cwd(), "--profile", [])
+    names = spec_for(plan.protocol).drive_watchdog(plan, profile).parameters
+    if not names:
+        return "its communication watchdog (set in registers its drive profile names)"
+    if named is not None:
+        return f"its communication watchdog ({named} registers {', '.join(names)})"
+    return f"its timeout function ({'/'.join(names)})"
 
 
 def _check_magnitudes(

@@ -202,11 +202,13 @@ async def diff(options: LineOptions | None, address: int | None, files: list[Pat
             right = await _read_drive(_Drive(session, address), _set_of(options))
         labels = (str(files[0]), f"drive {address}")
     differences = compare(left, right)
+    # A parameter only one side has is a difference too: count both sides' parameters.
+    compared = len(left.parameters.keys() | right.parameters.keys())
     if not differences:
-        print(f"no differences in {len(left.parameters)} parameters")
+        print(f"no differences in {compared} parameters")
         return EXIT_EQUAL
     _table(differences, *labels)
-    print(f"{len(differences)} of {len(left.parameters)} parameters differ")
+    print(f"{len(differences)} of {compared} parameters differ")
     return EXIT_DIFFERENT
 
 

@@ -154,3 +154,28 @@ def test_run_with_the_demo_config_named_is_the_demo(monkeypatch: pytest.MonkeyPa
     other = Path(__file__)
     assert main(["run", "--config", str(other)]) == 0
     assert seen[-1] == (other, False)
+
+
+def _parameter_set(path: Path, raws: dict[str, int]) -> Path:
+    rows = "".join(
+        f"  {key}: {{name: {key}, value: {raw}, raw: {raw}}}\n" for key, raw in raws.items()
+    )
+    path.write_text(
+        "format: fcmaster-parameter-set/1\nprotocol: modbus-rtu\naddress: 1\n"
+        f"saved_at: '2026-11-29T06:07:57Z'\nidentity: {{}}\nparameters:\n{rows}",
+        encoding="utf-8",
+    )
+    return path
+
+
+def test_params_diff_of_two_files_counts_the_parameters_of_both(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    left = _parameter_set(tmp_path / "left.yaml", {"hr1": 1, "hr2": 2})
+    right = _parameter_set(tmp_path / "right.yaml", {"hr1": 1, "hr3": 3, "hr4": 4})
+    assert main(["params", "diff", str(left), str(right)]) == 1
+    out = capsys.readouterr().out
+    assert [row.split()[0] for row in out.splitlines()[1:-1]] == ["hr2", "hr3", "hr4"]
+    assert out.splitlines()[-1] == "3 of 4 parameters differ"  # hr1 to hr4, both files'
+    assert main(["params", "diff", str(left), str(left)]) == 0
+    assert capsys.readouterr().out == "no differences in 2 parameters\n"

@@ -106,6 +106,28 @@ def test_direction_comes_from_the_reply_or_else_from_the_command() -> None:
     assert _get(fleet, "pump-1").direction == "forward"
 
 
+def test_a_signed_frequency_tells_the_direction_where_the_status_and_command_do_not() -> None:
+    fleet, _, _ = _fleet()
+
+    def frequency(hz: float, *, signed: bool, status: DriveStatus | None = None) -> str:
+        reply = Reply(address=1, status=status, output_frequency_hz=hz, output_signed=signed)
+        fleet.drive_replied("line1", PUMP, reply, 500.0, None)
+        return _get(fleet, "pump-1").direction
+
+    assert frequency(-20.0, signed=True) == "reverse"  # a V20's r0024, read on its own
+    assert _get(fleet, "pump-1").output_frequency_hz == 20.0
+    assert frequency(0.0, signed=True) == "reverse"  # at rest: no sign, nothing learned
+    assert frequency(20.0, signed=True, status=_status()) == "forward"  # read with the status
+    assert frequency(-20.0, signed=True, status=_status()) == "reverse"
+    # a magnitude says nothing of the direction; a reverse bit or a command still wins
+    assert frequency(20.0, signed=False) == "reverse"
+    assert frequency(-20.0, signed=True, status=_status(reverse=False)) == "forward"
+    intent = ControlIntent(Motion.RUN, reverse=True)
+    reply = Reply(address=1, status=_status(), output_frequency_hz=5.0, output_signed=True)
+    fleet.drive_replied("line1", PUMP, reply, 500.0, intent)
+    assert _get(fleet, "pump-1").direction == "reverse"
+
+
 def test_parameter_values_accumulate_by_name_and_index_each_with_its_own_time() -> None:
     fleet, _, _ = _fleet()
     key = ParameterKey("16-14", 1614)

@@ -218,7 +218,10 @@ class ModbusSimDrive:
         computed = self._computed.get((table_input, address))
         if computed is not None:
             register, offset, source = computed
-            return register.raw(source())[offset]
+            value = source()
+            # An unsigned register holds a magnitude: a drive running in reverse shows its
+            # direction in its status, not as a negative frequency (Yaskawa's 0024H).
+            return register.raw(value if register.signed else abs(value))[offset]
         stored = self.stored.get((table_input, address))
         if stored is None:
             raise Refused(ExceptionCode.ILLEGAL_DATA_ADDRESS)

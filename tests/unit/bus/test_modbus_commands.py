@@ -65,6 +65,21 @@ async def test_a_restart_under_an_abb_drive_in_reverse_keeps_it_in_reverse() -> 
     assert line.drives[ABB.address].motor.frequency_hz < -30.0
 
 
+async def test_a_restart_under_a_yaskawa_drive_in_reverse_never_runs_it_forward() -> None:
+    # Its output frequency is a magnitude: only its status says the direction.
+    line = sim_line(VirtualClock(T0), BAUDRATE, YASKAWA)
+    await _run_in_reverse(line, YASKAWA)
+    transport, master = master_on(line, BAUDRATE, YASKAWA)
+    async with master:
+        await line.clock.run_for(1.0)
+        result = await line.clock.complete(orders(master, "yaskawa").set_reference(frequency_hz=35))
+        await line.clock.run_for(3.0)
+    assert result.outcome is Outcome.DONE
+    words = _writes(transport.sent, YASKAWA.address, 1)
+    assert words and set(words) == {0x0002}  # reverse run, refreshed; never 0x0001
+    assert line.drives[YASKAWA.address].motor.frequency_hz < -30.0
+
+
 def test_a_magnitude_never_says_forward() -> None:
     slot = DriveSlot(ABB, sequence=(None,))
     running = DriveStatus(word=0, running=True, fault=False, warning=False, at_reference=True)

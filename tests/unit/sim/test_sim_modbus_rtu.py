@@ -141,3 +141,16 @@ def test_the_drives_watchdog_trips_it_when_the_master_falls_silent(
     assert state(sim) is State.FAULT
     assert sim.machine.fault == fault
     assert not sim.machine.running
+
+
+def test_an_unsigned_frequency_register_shows_the_magnitude_of_a_reverse_run() -> None:
+    sim = drive("yaskawa-memobus")  # output frequency 0x0024: unsigned 0.01 Hz
+    write(sim, 0x0002, 2000)  # 20 Hz
+    write(sim, 0x0001, 0x0002)  # reverse run
+    request = ReadRequest(address=1, function=Function.READ_HOLDING, start=0x0024, count=1)
+    answer = sim.handle(encode_request(request), 5.0)
+    assert sim.motor.frequency_hz == pytest.approx(-20.0)
+    assert answer is not None
+    assert decode_response(answer) == Registers(
+        address=1, function=Function.READ_HOLDING, values=(2000,)
+    )
