@@ -8,7 +8,8 @@ or :meth:`Planner.on_failure`. Time is always an argument, so every rule here is
 without asyncio. Order of service (DESIGN.md):
 
 1. urgent commands (stop, coast, quick stop), oldest first;
-2. other commands and parameter access, in arrival order;
+2. other commands and parameter access, in arrival order (taking turns with the polls once
+   they have held the line a while: :mod:`~fcmaster.bus.share`);
 3. a probe of a demoted drive, when one is due and the probe budget allows;
 4. the idle poll, round-robin over the drives that are not demoted.
 
@@ -40,9 +41,8 @@ repeated: the drive is adopted again from its next good status. Reverting would 
 motor (a start applied, its replies lost, then a stop). A trip (status fault rising) turns
 the intent into a stop, so a later reset does not restart the motor; a new start is needed.
 
-A drive that restarts on a request (``deaf_s``: the Mitsubishi inverter reset; its intent
-becomes a stop) or needs time after one (``settle_s``: a profile's pacing) is sent nothing,
-polls included, until then, while the other drives are served (:mod:`~fcmaster.bus.pacing`).
+A drive restarting on a request (``deaf_s``: Mitsubishi's reset) or settling after one
+(``settle_s``: a profile's pacing) is sent nothing until then (:mod:`~fcmaster.bus.pacing`).
 
 Every command ends exactly once, reported as a :class:`Completion`: the master resolves
 the caller's future from it. A stop supersedes motion commands of the same drive that are
@@ -51,14 +51,12 @@ still queued (they end ``superseded``); a newer reference takes the place of a q
 last step :meth:`Planner.next_step` handed out and not yet reported back): the drive may
 already be acting on it, and its reply must still find it at the head of its queue.
 
-The planner puts together parts with an interface each: the message types
-(:mod:`~fcmaster.bus.steps`), admission (:mod:`~fcmaster.bus.admission`: what is refused before
-it is queued), queue discipline (:mod:`~fcmaster.bus.queue`), polls, probes and liveness
-(:mod:`~fcmaster.bus.rotation`), the control-intent algebra (:mod:`~fcmaster.bus.intents`), a
-command's way through its exchanges, one after the other (:mod:`~fcmaster.bus.progress`), what a
-reply says about its drive (:mod:`~fcmaster.bus.hearing`) and the commands waiting for
-confirmation (:mod:`~fcmaster.bus.unconfirmed`). What is left here is choosing the next step and
-what a failure means for its drive.
+Its parts: the message types (:mod:`~fcmaster.bus.steps`), admission
+(:mod:`~fcmaster.bus.admission`), the queue (:mod:`~fcmaster.bus.queue`), polls, probes and
+liveness (:mod:`~fcmaster.bus.rotation`), the intent algebra (:mod:`~fcmaster.bus.intents`), a
+command's exchanges (:mod:`~fcmaster.bus.progress`), what a reply says of its drive
+(:mod:`~fcmaster.bus.hearing`), commands awaiting confirmation (:mod:`~fcmaster.bus.unconfirmed`).
+Left here: choosing the next step, and what a failure means for its drive.
 """
 
 from __future__ import annotations
@@ -78,6 +76,7 @@ from fcmaster.bus.plan import DrivePlan, LinePlan, OnStart
 from fcmaster.bus.progress import Progress
 from fcmaster.bus.queue import CommandQueue
 from fcmaster.bus.rotation import Choice, Rotation
+from fcmaster.bus.share import CommandShare
 from fcmaster.bus.steps import (
     Completion,
     DriveSlot,
@@ -122,6 +121,7 @@ class Planner:
         self._hearing = Hearing(codec, self.rotation, self._confirming)
         self._progress = Progress(codec, self._queue, self._confirming, self._targets)
         self._peeked: Step | None = None  # the step peek chose, until it is committed
+        self._share = CommandShare()  # how long commands may keep the round waiting
         self.held = False  # nothing more is sent until the master has reconfigured the line
 
     def _new_slot(self, drive: DrivePlan) -> DriveSlot:
@@ -262,18 +262,19 @@ class Planner:
         reply, and when a command comes in meanwhile it peeks again instead.
         """
         pending = self._next_command(now) if self._queue else None
-        if pending is not None:
-            step = self._progress.step(pending)
-        else:
+        choice = None
+        if pending is None or self._share.poll_first(pending, now):
             choice = self.rotation.peek(now)
-            if choice is None:
-                step = None
-            elif choice.kind is StepKind.POLL:
-                step = Step(StepKind.POLL, self._poll(choice.slot), choice.slot)
+        step: Step | None = None
+        if choice is not None:
+            slot = choice.slot
+            if choice.kind is StepKind.POLL:
+                step = Step(StepKind.POLL, self._poll(slot), slot)
             else:
-                slot = choice.slot
                 probe = self.codec.poll(slot.address, stopping_only(slot.intent), None)
                 step = Step(StepKind.PROBE, probe, slot)
+        elif pending is not None:
+            step = self._progress.step(pending)
         self._peeked = step
         return step
 
@@ -294,6 +295,10 @@ class Planner:
         pending, slot = step.pending, step.slot
         self._in_flight = pending
         if pending is not None:
+            self._share.command_sent(now)
+        else:
+            self._share.after_command = False
+        if pending is not None:
             command = pending.command
             if command.action.is_control and pending.intent is None:
                 pending.phase = Phase.LEARNING
@@ -313,17 +318,11 @@ class Planner:
         self.rotation.commit(Choice(step.kind, slot), now)
 
     def next_wakeup(self, now: float) -> float | None:
-        """When a probe falls due or a drive is heard again, if nothing else is to do.
-
-        None: only a command wakes us.
-        """
+        """When a probe falls due or a drive is heard again (None: only a command wakes us)."""
         return self.rotation.next_wakeup(now)
 
     def _next_command(self, now: float) -> Pending | None:
-        """The oldest urgent command, else the oldest other one, whose drive can hear it.
-
-        A command for a restarting drive waits, without holding up the other drives'.
-        """
+        """The oldest urgent command, else the oldest other one, whose drive can hear it."""
         return self._queue.next_ready(now, self._targets)
 
     def _poll(self, slot: DriveSlot) -> Exchange:
