@@ -46,6 +46,7 @@ from cryptography import x509
 from cryptography.hazmat.primitives.serialization import Encoding
 
 from fcmaster.opcua import pki as pki_module
+from fcmaster.opcua.limits import SessionQuota
 from fcmaster.opcua.sessions import SessionBook, channels_of
 
 __all__ = ["CALLER", "Channels", "Gate", "Rules", "Users", "track_callers"]
@@ -228,11 +229,16 @@ class Gate:
 class _CallerSession(InternalSession):
     book: SessionBook | None = None
     channels: Channels | None = None
+    replaces: InternalSession | None = None  # its connection's previous session
     application = ""  # the client's own name, from its CreateSession
 
     async def create_session(
         self, params: ua.CreateSessionParameters, sockname: tuple[str, int] | None = None
     ) -> ua.CreateSessionResult:
+        previous, self.replaces = self.replaces, None
+        if previous is not None and not previous.is_activated():
+            # asyncua forgets it without closing it: it would stay registered for ever
+            await previous.close_session()
         if self.channels is not None:
             self.channels.check(self)
         description = params.ClientDescription
@@ -266,18 +272,23 @@ class _CallerSession(InternalSession):
 
 
 def track_callers(
-    iserver: InternalServer, book: SessionBook | None = None, channels: Channels | None = None
+    iserver: InternalServer,
+    book: SessionBook | None = None,
+    channels: Channels | None = None,
+    quota: SessionQuota | None = None,
 ) -> None:
     """Make every session ``iserver`` creates name its user in :data:`CALLER` during calls.
 
     With ``book``, each session also says when it is activated and when it closes; with
-    ``channels``, it is created and activated only on a channel offered.
+    ``channels``, it is created and activated only on a channel offered; with ``quota``, a
+    connection creates only so many.
     """
 
     def create_session(
         name: str, user: User | None = None, external: bool = False
     ) -> InternalSession:
         user = user or User(role=UserRole.Anonymous)
+        previous = quota.admit(name) if quota is not None and external else None
         session = _CallerSession(
             iserver,
             iserver.aspace,
@@ -288,6 +299,7 @@ def track_callers(
         )
         session.book = book
         session.channels = channels
+        session.replaces = previous
         return session
 
     # asyncua has no hook for the sessions it makes: its factory method is replaced

@@ -32,7 +32,7 @@ import structlog
 from asyncua import Server, ua
 
 from fcmaster import logsetup
-from fcmaster.opcua import pki
+from fcmaster.opcua import limits, pki
 from fcmaster.opcua.access import CALLER, Channels, Gate, Rules, Users, track_callers
 from fcmaster.opcua.sessions import SessionBook
 from fcmaster.opcua.space import Space
@@ -131,7 +131,7 @@ async def serve(child: Child, hello: dict[str, Any]) -> None:
     rules = Rules(anonymous=settings["anonymous"])
     policies = [_POLICIES[s] for s in settings["security"]]
     channels = Channels(server, list(settings["security"]), rules)
-    track_callers(server.iserver, book, channels)
+    track_callers(server.iserver, book, channels, limits.SessionQuota(server))
     server.set_endpoint(f"opc.tcp://{'[' + host + ']' if ':' in host else host}:{port}/")
     server.set_server_name("fcmaster")
     await server.set_application_uri(pki.APPLICATION_URI)
@@ -148,7 +148,9 @@ async def serve(child: Child, hello: dict[str, Any]) -> None:
     server.set_certificate_validator(Gate(folder, child.rejected))
     space = Space(server, child.call)
     await space.build(hello["drives"], hello["lines"])
+    limits.apply(server)
     async with server:
+        limits.apply(server)
         channels.limit_none(policies)
         child.send({"t": "ready"})
         log.info("opcua.listening", host=host, port=port, security=settings["security"])

@@ -42,6 +42,18 @@ logging: {{level: info, format: json}}
 RUNNING = "ns=2;s=Drives/pump-1/Running"
 
 
+def _session(url: str) -> ua.CreateSessionParameters:
+    description = ua.ApplicationDescription(
+        ApplicationUri="urn:none-channel",
+        ApplicationName=ua.LocalizedText("none-channel"),
+        ApplicationType=ua.ApplicationType.Client,
+    )
+    return ua.CreateSessionParameters(
+        ClientNonce=b"x" * 32, ClientDescription=description, EndpointUrl=url,
+        SessionName="none-channel", RequestedSessionTimeout=60000,
+    )  # fmt: skip
+
+
 async def _over_none(url: str) -> dict[str, Any]:
     """Discover, then create and activate an operator's session and start pump-1 over None."""
     seen: dict[str, Any] = {}
@@ -52,15 +64,7 @@ async def _over_none(url: str) -> dict[str, Any]:
         await client.open_secure_channel()
         endpoints = await client.uaclient.get_endpoints(ua.GetEndpointsParameters(EndpointUrl=url))
         seen["endpoints"] = sorted(e.SecurityPolicyUri.rpartition("#")[2] for e in endpoints)
-        description = ua.ApplicationDescription(
-            ApplicationUri="urn:none-channel",
-            ApplicationName=ua.LocalizedText("none-channel"),
-            ApplicationType=ua.ApplicationType.Client,
-        )
-        session = ua.CreateSessionParameters(
-            ClientNonce=b"x" * 32, ClientDescription=description, EndpointUrl=url,
-            SessionName="none-channel", RequestedSessionTimeout=60000,
-        )  # fmt: skip
+        session = _session(url)
         try:
             await client.uaclient.create_session(session)
         except ua.UaStatusCodeError as exc:
