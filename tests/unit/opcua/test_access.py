@@ -157,3 +157,18 @@ def test_a_none_channel_not_offered_serves_discovery_alone() -> None:
     server.bserver.given.clear()
     Channels(server, ["None"], rules).limit_none([ua.SecurityPolicyType.NoSecurity])
     assert server.bserver.given == []  # None offered: asyncua's own policy, with the rules
+
+
+def test_only_the_certificates_refused_last_are_kept(tmp_path: Path) -> None:
+    refused = [f"certificate {n}".encode() for n in range(6)]
+    for der in refused[:4]:
+        pki.reject(tmp_path, der, keep=3)
+    pki.reject(tmp_path, refused[1], keep=3)  # refused again: the newest now
+    pki.reject(tmp_path, refused[4], keep=3)
+    kept = {f.stem for f in (tmp_path / "rejected").glob("*.der")}
+    assert kept == {pki.thumbprint(refused[n]) for n in (1, 3, 4)}
+    flood = tmp_path / "flood"
+    for n in range(pki.KEEP_REJECTED + 20):  # a client making a new certificate each time
+        pki.reject(flood, f"flood {n}".encode())
+    kept = {f.stem for f in (flood / "rejected").glob("*.der")}
+    assert kept == {pki.thumbprint(f"flood {n}".encode()) for n in range(20, 120)}
