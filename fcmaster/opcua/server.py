@@ -94,9 +94,9 @@ class Child:
         number = next(self._ids)
         future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
         self._calls[number] = future
-        self.send({"t": "call", "id": number, "drive": drive, "user": user.name,
-                   "method": method, "command": command})  # fmt: skip
-        try:
+        try:  # whatever happens (the send fails too), the call leaves no future behind
+            self.send({"t": "call", "id": number, "drive": drive, "user": user.name,
+                       "method": method, "command": command})  # fmt: skip
             result = await future
         finally:
             self._calls.pop(number, None)
