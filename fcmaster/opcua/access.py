@@ -10,6 +10,11 @@ write, and does not tell a method who called it. Here:
 - :class:`Rules` lets sessions browse, read and subscribe; calls only for named users (the
   daemon then decides by the user's role); writes for nobody, so every variable is read-only
   whatever its access level says;
+- :class:`Channels` lets sessions live only on the secure channels of ``opcua.security``:
+  asyncua starts every connection on SecurityPolicyNone and lets an OpenSecureChannel for
+  None through whether None is offered or not, and such a channel has no permission check
+  at all. Clients need a None channel to discover the endpoints (GetEndpoints and
+  FindServers, as OPC UA allows), so it stays open for that, and for nothing else;
 - :func:`track_callers` makes every session put its user in :data:`CALLER` while it runs a
   call request, so a method learns who called it. The method runs inside that request's own
   await chain (asyncua awaits a coroutine method directly), so the variable holds exactly
@@ -25,8 +30,14 @@ from pathlib import Path
 from typing import Any
 
 import structlog
-from asyncua import ua
+from asyncua import Server, ua
+from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import SimpleRoleRuleset, User, UserRole
+from asyncua.crypto.security_policies import (
+    SECURITY_POLICY_TYPE_MAP,
+    SecurityPolicyFactory,
+    SecurityPolicyNone,
+)
 from asyncua.server.internal_server import InternalServer
 from asyncua.server.internal_session import InternalSession
 from asyncua.server.user_managers import UserManager
@@ -35,9 +46,10 @@ from cryptography import x509
 from cryptography.hazmat.primitives.serialization import Encoding
 
 from fcmaster.opcua import pki as pki_module
-from fcmaster.opcua.sessions import SessionBook
+from fcmaster.opcua.limits import SessionQuota
+from fcmaster.opcua.sessions import SessionBook, channels_of
 
-__all__ = ["CALLER", "Gate", "Rules", "Users", "track_callers"]
+__all__ = ["CALLER", "Channels", "Gate", "Rules", "Users", "track_callers"]
 
 CALLER: ContextVar[User | None] = ContextVar("fcmaster_opcua_caller", default=None)
 log = structlog.get_logger("fcmaster.opcua")
@@ -98,6 +110,71 @@ class Rules(SimpleRoleRuleset):  # the type asyncua's set_security_policy asks f
         return False
 
 
+class _DiscoveryOnly(SimpleRoleRuleset):
+    """The rules of a None channel where None is not offered: nothing but discovery.
+
+    asyncua asks the rules about every request but CreateSession, ActivateSession,
+    CloseSession, GetEndpoints, FindServers and RegisterServer: what it asks about is refused
+    (a session created elsewhere and reattached here by its token included). The sessions
+    themselves are refused by :class:`Channels`.
+    """
+
+    def __init__(self) -> None:
+        """No table: nothing is allowed (SimpleRoleRuleset's own is not used)."""
+
+    def check_validity(self, user: User, action_type_id: ua.NodeId, body: Any) -> bool:
+        """Never."""
+        kind = _NAMES.get(action_type_id, str(action_type_id))
+        log.warning("opcua.request_refused", actor=f"opcua:{user.name or 'anonymous'}",
+                    request=kind, security="None")  # fmt: skip
+        return False
+
+
+class Channels:
+    """The secure channels that may carry a session: those of ``opcua.security``."""
+
+    def __init__(self, server: Server, security: list[str], rules: SimpleRoleRuleset) -> None:
+        self.server = server
+        self.security = frozenset(security)
+        self._rules = rules
+
+    def check(self, session: InternalSession) -> None:
+        """Refuse ``session`` (BadSecurityPolicyRejected) on a channel not offered."""
+        for security in channels_of(self.server, session):
+            if security not in self.security:
+                log.warning("opcua.session_refused", client=_client(session.name),
+                            security=security)  # fmt: skip
+                raise ServiceError(ua.StatusCodes.BadSecurityPolicyRejected)
+
+    def limit_none(self, policies: list[ua.SecurityPolicyType]) -> None:
+        """Give the None channels discovery-only rules (call once the server listens).
+
+        asyncua picks a channel's policy among those it is given, else keeps the None it
+        started with, which carries no rules: where None is not offered, a None policy with
+        :class:`_DiscoveryOnly` rules is given besides the offered ones.
+        """
+        if "None" in self.security or self.server.bserver is None:
+            return
+        iserver = self.server.iserver
+
+        def factory(policy: Any, mode: Any, rules: Any) -> Any:
+            # asyncua's factory is untyped: its arguments are the ones Server itself passes
+            return SecurityPolicyFactory(  # type: ignore[no-untyped-call]
+                policy, mode, iserver.certificate, iserver.private_key, permission_ruleset=rules
+            )
+
+        offered = (SECURITY_POLICY_TYPE_MAP[kind] for kind in policies)
+        factories = [factory(policy, mode, self._rules) for policy, mode, _ in offered]
+        factories.append(
+            factory(SecurityPolicyNone, ua.MessageSecurityMode.None_, _DiscoveryOnly())
+        )
+        self.server.bserver.set_policies(factories)
+
+
+def _client(address: Any) -> str:
+    return f"{address[0]}:{address[1]}" if isinstance(address, tuple) else str(address)
+
+
 class Users(UserManager):
     """The users of ``http.tokens`` (and anonymous readers when switched on)."""
 
@@ -151,11 +228,19 @@ class Gate:
 
 class _CallerSession(InternalSession):
     book: SessionBook | None = None
+    channels: Channels | None = None
+    replaces: InternalSession | None = None  # its connection's previous session
     application = ""  # the client's own name, from its CreateSession
 
     async def create_session(
         self, params: ua.CreateSessionParameters, sockname: tuple[str, int] | None = None
     ) -> ua.CreateSessionResult:
+        previous, self.replaces = self.replaces, None
+        if previous is not None and not previous.is_activated():
+            # asyncua forgets it without closing it: it would stay registered for ever
+            await previous.close_session()
+        if self.channels is not None:
+            self.channels.check(self)
         description = params.ClientDescription
         if description is not None and description.ApplicationName is not None:
             self.application = description.ApplicationName.Text or ""
@@ -165,6 +250,8 @@ class _CallerSession(InternalSession):
     def activate_session(
         self, params: ua.ActivateSessionParameters, peer_certificate: bytes | None
     ) -> ua.ActivateSessionResult:
+        if self.channels is not None:  # again: a session may be reattached to another channel
+            self.channels.check(self)
         result: ua.ActivateSessionResult = super().activate_session(params, peer_certificate)
         if self.book is not None:  # reached only once the user was let in
             self.book.activated(self, self.application)
@@ -184,16 +271,24 @@ class _CallerSession(InternalSession):
             CALLER.reset(token)
 
 
-def track_callers(iserver: InternalServer, book: SessionBook | None = None) -> None:
+def track_callers(
+    iserver: InternalServer,
+    book: SessionBook | None = None,
+    channels: Channels | None = None,
+    quota: SessionQuota | None = None,
+) -> None:
     """Make every session ``iserver`` creates name its user in :data:`CALLER` during calls.
 
-    With ``book``, each session also says when it is activated and when it closes.
+    With ``book``, each session also says when it is activated and when it closes; with
+    ``channels``, it is created and activated only on a channel offered; with ``quota``, a
+    connection creates only so many.
     """
 
     def create_session(
         name: str, user: User | None = None, external: bool = False
     ) -> InternalSession:
         user = user or User(role=UserRole.Anonymous)
+        previous = quota.admit(name) if quota is not None and external else None
         session = _CallerSession(
             iserver,
             iserver.aspace,
@@ -203,6 +298,8 @@ def track_callers(iserver: InternalServer, book: SessionBook | None = None) -> N
             external=external,
         )
         session.book = book
+        session.channels = channels
+        session.replaces = previous
         return session
 
     # asyncua has no hook for the sessions it makes: its factory method is replaced

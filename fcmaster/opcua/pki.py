@@ -17,6 +17,7 @@ import datetime
 import hashlib
 import os
 import socket
+import time
 from pathlib import Path
 from typing import Any, Final
 
@@ -40,6 +41,7 @@ __all__ = [
 
 APPLICATION_URI: Final = f"urn:{socket.gethostname()}:fcmaster"
 FOLDERS: Final = ("own", "trusted", "rejected")
+KEEP_REJECTED: Final = 100  # a client flooding new certificates must not fill the disk
 _VALID_DAYS: Final = 3650
 _KEY_BITS: Final = 2048  # what Basic256Sha256 and Aes256_Sha256_RsaPss ask for (2048-4096)
 
@@ -130,12 +132,23 @@ def trusted(pki: Path, der: bytes) -> bool:
     return file.is_file() and file.read_bytes() == der
 
 
-def reject(pki: Path, der: bytes) -> Path:
-    """Keep a refused client's certificate in ``rejected/`` for an operator to judge."""
+def reject(pki: Path, der: bytes, keep: int = KEEP_REJECTED) -> Path:
+    """Keep a refused client's certificate in ``rejected/`` for an operator to judge.
+
+    Only the ``keep`` refused last are kept: the oldest files go. A certificate refused
+    again counts as new, so the client an operator is about to trust stays.
+    """
     _folders(pki)
     file = pki / "rejected" / f"{thumbprint(der)}.der"
     if not file.exists():
         file.write_bytes(der)
+    others = [f for f in (pki / "rejected").glob("*.der") if f != file]
+    kept = sorted(others, key=lambda f: f.stat().st_mtime_ns)
+    # its time says it is the newest even where the clock ticks coarser than refusals come
+    newest = max([time.time_ns(), *(f.stat().st_mtime_ns + 1 for f in kept[-1:])])
+    os.utime(file, ns=(newest, newest))
+    for old in kept[: max(0, len(kept) + 1 - keep)]:
+        old.unlink(missing_ok=True)
     return file
 
 

@@ -32,8 +32,8 @@ import structlog
 from asyncua import Server, ua
 
 from fcmaster import logsetup
-from fcmaster.opcua import pki
-from fcmaster.opcua.access import CALLER, Gate, Rules, Users, track_callers
+from fcmaster.opcua import limits, pki
+from fcmaster.opcua.access import CALLER, Channels, Gate, Rules, Users, track_callers
 from fcmaster.opcua.sessions import SessionBook
 from fcmaster.opcua.space import Space
 from fcmaster.opcua.wire import Decoder, encode
@@ -94,9 +94,9 @@ class Child:
         number = next(self._ids)
         future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
         self._calls[number] = future
-        self.send({"t": "call", "id": number, "drive": drive, "user": user.name,
-                   "method": method, "command": command})  # fmt: skip
-        try:
+        try:  # whatever happens (the send fails too), the call leaves no future behind
+            self.send({"t": "call", "id": number, "drive": drive, "user": user.name,
+                       "method": method, "command": command})  # fmt: skip
             result = await future
         finally:
             self._calls.pop(number, None)
@@ -128,7 +128,10 @@ async def serve(child: Child, hello: dict[str, Any]) -> None:
     server = Server(user_manager=users)
     await server.init()
     book = SessionBook(server, lambda listed: child.send({"t": "sessions", "sessions": listed}))
-    track_callers(server.iserver, book)
+    rules = Rules(anonymous=settings["anonymous"])
+    policies = [_POLICIES[s] for s in settings["security"]]
+    channels = Channels(server, list(settings["security"]), rules)
+    track_callers(server.iserver, book, channels, limits.SessionQuota(server))
     server.set_endpoint(f"opc.tcp://{'[' + host + ']' if ':' in host else host}:{port}/")
     server.set_server_name("fcmaster")
     await server.set_application_uri(pki.APPLICATION_URI)
@@ -137,10 +140,7 @@ async def serve(child: Child, hello: dict[str, Any]) -> None:
     server.application_type = ua.ApplicationType.Server
     await server.load_certificate(str(cert))
     await server.load_private_key(str(key))
-    server.set_security_policy(
-        [_POLICIES[s] for s in settings["security"]],
-        permission_ruleset=Rules(anonymous=settings["anonymous"]),
-    )
+    server.set_security_policy(policies, permission_ruleset=rules)
     tokens: list[type] = [ua.UserNameIdentityToken]
     if settings["anonymous"]:
         tokens.append(ua.AnonymousIdentityToken)
@@ -148,7 +148,10 @@ async def serve(child: Child, hello: dict[str, Any]) -> None:
     server.set_certificate_validator(Gate(folder, child.rejected))
     space = Space(server, child.call)
     await space.build(hello["drives"], hello["lines"])
+    limits.apply(server)
     async with server:
+        limits.apply(server)
+        channels.limit_none(policies)
         child.send({"t": "ready"})
         log.info("opcua.listening", host=host, port=port, security=settings["security"])
         while (message := await child.next_message()) is not None:

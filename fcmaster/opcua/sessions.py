@@ -17,7 +17,7 @@ from typing import Any
 
 from asyncua import Server, ua
 
-__all__ = ["SessionBook"]
+__all__ = ["SessionBook", "channels_of"]
 
 
 class SessionBook:
@@ -54,14 +54,25 @@ class SessionBook:
 
     def _security(self, session: Any) -> str:
         """The policy and mode of the connection that carries ``session``."""
-        # asyncua keeps the channel's policy on its connection, not on the session it serves
-        server = self._server.bserver
-        for protocol in server.clients if server is not None else ():
-            processor = protocol.processor
-            if processor is not None and processor.session is session:
-                policy = processor._connection.security_policy
-                name = policy.URI.rpartition("#")[2]
-                if policy.Mode == ua.MessageSecurityMode.None_:
-                    return name
-                return f"{name}:{ua.MessageSecurityMode(policy.Mode).name}"
-        return "unknown"
+        return next(iter(channels_of(self._server, session)), "unknown")
+
+
+def channels_of(server: Server, session: Any) -> list[str]:
+    """The security of each connection that carries ``session``, as ``opcua.security`` writes it.
+
+    Usually one; two while a client reattaches its session to a new connection, none once
+    its connection is lost.
+    """
+    # asyncua keeps the channel's policy on its connection, not on the session it serves
+    found = []
+    listening = server.bserver
+    for protocol in listening.clients if listening is not None else ():
+        processor = protocol.processor
+        if processor is not None and processor.session is session:
+            policy = processor._connection.security_policy
+            name = policy.URI.rpartition("#")[2]
+            if policy.Mode == ua.MessageSecurityMode.None_:
+                found.append(name)
+            else:
+                found.append(f"{name}:{ua.MessageSecurityMode(policy.Mode).name}")
+    return found

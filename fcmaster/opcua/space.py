@@ -13,6 +13,7 @@ quality changes, with the time of the reading that showed it.
 from __future__ import annotations
 
 import datetime
+import math
 from collections.abc import Awaitable, Callable, Iterable, Mapping
 from typing import Any, Final
 
@@ -123,11 +124,18 @@ class Space:
         self, drive: str, method: str, action: str
     ) -> Callable[..., Awaitable[list[ua.Variant] | ua.StatusCode]]:
         async def called(parent: ua.NodeId, *args: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
+            # asyncua runs a method on whatever object the call names: only its own drive's
+            if parent != self._id(f"Drives/{drive}"):
+                return ua.StatusCode(ua.StatusCodes.BadMethodInvalid)
             command: dict[str, Any] = {"action": action}
             if method == "SetReference":
-                if len(args) != 1 or not isinstance(args[0].Value, int | float):
+                given = args[0].Value if len(args) == 1 else None
+                # a Boolean is an int to Python, and NaN or infinity no frequency at all
+                if isinstance(given, bool) or not isinstance(given, int | float):
                     return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
-                command["frequency_hz"] = float(args[0].Value)
+                if not math.isfinite(given):
+                    return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+                command["frequency_hz"] = float(given)
             elif args:
                 return ua.StatusCode(ua.StatusCodes.BadTooManyArguments)
             return await self._call(drive, method, command)

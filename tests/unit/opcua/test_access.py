@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
 from asyncua import ua
+from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256, SecurityPolicyNone
 from cryptography import x509
 from structlog.testing import capture_logs
 
 from fcmaster.errors import UsageError
 from fcmaster.opcua import pki
-from fcmaster.opcua.access import Gate, Rules, Users
+from fcmaster.opcua.access import Channels, Gate, Rules, Users
 
 TOKENS = {"scada": "viewer-token-0123456789", "ops": "operator-token-0123456789"}
 SERVER: Any = None  # get_user does not look at the server
@@ -102,3 +105,70 @@ def test_the_own_certificate_is_made_once(tmp_path: Path) -> None:
         x509.SubjectAlternativeName
     )
     assert pki.APPLICATION_URI in names.value.get_values_for_type(x509.UniformResourceIdentifier)
+
+
+def _listening(*policies: Any) -> Any:
+    """A server's listener as :class:`Channels` sees it: one connection per channel policy."""
+    clients = [
+        SimpleNamespace(processor=SimpleNamespace(
+            session=None, _connection=SimpleNamespace(security_policy=policy)
+        ))
+        for policy in policies
+    ]  # fmt: skip
+    given: list[Any] = []
+    bserver = SimpleNamespace(clients=clients, set_policies=given.extend, given=given)
+    return SimpleNamespace(
+        bserver=bserver, iserver=SimpleNamespace(certificate=None, private_key=None)
+    )
+
+
+def test_a_session_lives_only_on_a_channel_offered() -> None:
+    secure = SimpleNamespace(URI=SecurityPolicyBasic256Sha256.URI,
+                             Mode=ua.MessageSecurityMode.SignAndEncrypt)  # fmt: skip
+    plain = SimpleNamespace(URI=SecurityPolicyNone.URI, Mode=ua.MessageSecurityMode.None_)
+    server = _listening(secure, plain)
+    channels = Channels(server, ["Basic256Sha256:SignAndEncrypt"], Rules(anonymous=False))
+    session = SimpleNamespace(name=("10.0.0.9", 50000))
+    secure_one, none_one = (c.processor for c in server.bserver.clients)
+    secure_one.session = session
+    channels.check(session)  # type: ignore[arg-type]  # the shape check reads
+    none_one.session = session  # the same session reattached to a None channel by its token
+    with capture_logs() as logs, pytest.raises(ServiceError) as refused:
+        channels.check(session)  # type: ignore[arg-type]
+    assert refused.value.code == ua.StatusCodes.BadSecurityPolicyRejected
+    assert [(e["event"], e["security"]) for e in logs] == [("opcua.session_refused", "None")]
+    offered = Channels(server, ["None", "Basic256Sha256:SignAndEncrypt"], Rules(anonymous=False))
+    offered.check(session)  # type: ignore[arg-type]
+
+
+def test_a_none_channel_not_offered_serves_discovery_alone() -> None:
+    server = _listening()
+    rules = Rules(anonymous=True)
+    channels = Channels(server, ["Basic256Sha256:SignAndEncrypt"], rules)
+    channels.limit_none([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
+    secure, none = server.bserver.given
+    assert secure.matches(SecurityPolicyBasic256Sha256.URI, ua.MessageSecurityMode.SignAndEncrypt)
+    assert secure.permission_ruleset is rules
+    assert none.matches(SecurityPolicyNone.URI, ua.MessageSecurityMode.None_)
+    operator = User(role=UserRole.User, name="ops")
+    # asyncua asks these rules about every request but the sessions' and discovery's own
+    for kind in ("Read", "Browse", "Call", "CreateSubscription", "Publish"):
+        assert none.create(None).permissions.check_validity(operator, request(kind), None) is False
+    server.bserver.given.clear()
+    Channels(server, ["None"], rules).limit_none([ua.SecurityPolicyType.NoSecurity])
+    assert server.bserver.given == []  # None offered: asyncua's own policy, with the rules
+
+
+def test_only_the_certificates_refused_last_are_kept(tmp_path: Path) -> None:
+    refused = [f"certificate {n}".encode() for n in range(6)]
+    for der in refused[:4]:
+        pki.reject(tmp_path, der, keep=3)
+    pki.reject(tmp_path, refused[1], keep=3)  # refused again: the newest now
+    pki.reject(tmp_path, refused[4], keep=3)
+    kept = {f.stem for f in (tmp_path / "rejected").glob("*.der")}
+    assert kept == {pki.thumbprint(refused[n]) for n in (1, 3, 4)}
+    flood = tmp_path / "flood"
+    for n in range(pki.KEEP_REJECTED + 20):  # a client making a new certificate each time
+        pki.reject(flood, f"flood {n}".encode())
+    kept = {f.stem for f in (flood / "rejected").glob("*.der")}
+    assert kept == {pki.thumbprint(f"flood {n}".encode()) for n in range(20, 120)}

@@ -79,3 +79,42 @@ async def test_a_listed_value_that_reads_as_text_says_so_in_its_data_type(space:
     assert await node.read_data_type() == ua.NodeId(ua.ObjectIds.String)
     made_so = space.server.get_node(ua.NodeId("Drives/pump-1/Values/Motor Current", space.ns))
     assert await made_so.read_data_type() == ua.NodeId(ua.ObjectIds.Double)
+
+
+async def _call(space: Space, on: str, method: str, *args: ua.Variant) -> ua.StatusCode:
+    """Call ``method`` of pump-1 on the object ``on``, as a client would: its status."""
+    request = ua.CallMethodRequest(
+        ObjectId=ua.NodeId(on, 2), MethodId=ua.NodeId(f"Drives/pump-1/{method}", 2),
+        InputArguments=list(args),
+    )  # fmt: skip
+    (result,) = await space.server.iserver.isession.call([request])
+    status: ua.StatusCode = result.StatusCode
+    return status
+
+
+@pytest.mark.parametrize(
+    "value",
+    [
+        pytest.param(ua.Variant(float("nan"), ua.VariantType.Double), id="nan"),
+        pytest.param(ua.Variant(float("inf"), ua.VariantType.Double), id="inf"),
+        pytest.param(ua.Variant(float("-inf"), ua.VariantType.Double), id="-inf"),
+        pytest.param(ua.Variant(True, ua.VariantType.Boolean), id="boolean"),
+        pytest.param(ua.Variant("30", ua.VariantType.String), id="text"),
+    ],
+)
+async def test_a_reference_that_is_no_finite_number_is_an_invalid_argument(
+    space: Space, value: ua.Variant
+) -> None:
+    status = await _call(space, "Drives/pump-1", "SetReference", value)
+    assert status.value == ua.StatusCodes.BadInvalidArgument
+    fine = ua.Variant(30.0, ua.VariantType.Double)  # reaches the daemon (here: refused)
+    status = await _call(space, "Drives/pump-1", "SetReference", fine)
+    assert status.value == ua.StatusCodes.BadUserAccessDenied
+
+
+async def test_a_method_called_on_another_object_is_invalid(space: Space) -> None:
+    status = await _call(space, "Drives", "Start")
+    assert status.value == ua.StatusCodes.BadMethodInvalid
+    assert (
+        await _call(space, "Drives/pump-1", "Start")
+    ).value == ua.StatusCodes.BadUserAccessDenied
