@@ -65,6 +65,7 @@ from fcmaster.config_sections import (
     SparkplugModel,
     TlsModel,
     TokenModel,
+    listeners_apart,
 )
 from fcmaster.config_sections import StrictModel as _Model
 from fcmaster.config_values import baudrate_problem, check_name, port_url_problem
@@ -498,6 +499,9 @@ def _check(
         check_modbus(model.modbus, model.buses, problems)
     if model.opcua is not None:
         check_opcua(model.opcua, model.http, _beside(source, model.opcua.pki), problems)
+    servers = {"http": model.http, "modbus": model.modbus, "opcua": model.opcua}
+    listens = {f"{k}.listen": None if v is None else v.listen for k, v in servers.items()}
+    listeners_apart(listens, problems)
     for b, bus in enumerate(model.buses):
         if bus.port.startswith("sim://"):  # what `run` builds the simulated line from
             from fcmaster.clock import MonotonicClock

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import ipaddress
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Final, Literal
 from urllib.parse import urlsplit
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -196,6 +196,29 @@ def _cidr(text: str) -> str:
     except ValueError:
         raise ValueError(f"{text!r} is not an address or network like 10.0.0.0/8") from None
     return text
+
+
+_EVERY_ADDRESS: Final = frozenset(("", "0.0.0.0", "::", "*"))
+
+
+def listeners_apart(listens: dict[str, str | None], problems: list[tuple[str, str]]) -> None:
+    """Two of the gateway's servers on one port: named now, not found as the daemon starts.
+
+    ``listens`` maps each server's key (``opcua.listen``) to its address, None when off. One
+    on every address meets any other on the same port.
+    """
+    taken: list[tuple[str, str, int]] = []
+    for key, listen in listens.items():
+        if listen is None:
+            continue
+        host, port = modbus_listen(listen)
+        if port is None or port == 0:
+            continue  # judged by the section itself
+        for other, other_host, other_port in taken:
+            if port == other_port and (host == other_host or {host, other_host} & _EVERY_ADDRESS):
+                problems.append((key, f"port {port} is {other}'s too: give each server its own"))
+                break
+        taken.append((key, host, port))
 
 
 def _listen_address(listen: str, port_example: int) -> str:

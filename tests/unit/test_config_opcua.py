@@ -107,3 +107,15 @@ def test_a_pki_that_is_a_file_is_refused(tmp_path: Path) -> None:
     (tmp_path / "pki").write_text("")
     ((path, reason),) = problems(LINE + f"opcua: {{pki: {tmp_path / 'pki'}}}\n")
     assert (path, reason) == ("opcua.pki", f"{tmp_path / 'pki'} is not a folder")
+
+
+def test_two_servers_on_one_port_are_refused_naming_the_second() -> None:
+    clash = LINE + TOKENS.replace("http:\n", "http:\n  listen: 127.0.0.1:4841\n")
+    found = problems(clash + "opcua: {listen: '127.0.0.1:4841', pki: /tmp}\n")
+    assert [(k, r) for k, r in found if k == "opcua.listen"] == [
+        ("opcua.listen", "port 4841 is http.listen's too: give each server its own")
+    ]
+    every = clash + "modbus: {listen: '0.0.0.0:4841', allow: [10.0.0.0/8]}\n"
+    assert [k for k, _ in problems(every)] == ["modbus.listen"]
+    apart = clash + "opcua: {listen: '127.0.0.1:4840', pki: /tmp}\n"
+    assert parse(apart).opcua is not None
