@@ -39,7 +39,7 @@ from fcmaster.clock import MonotonicClock
 from fcmaster.config_profiles import drive_profile
 from fcmaster.config_values import baudrate_problem, port_url_problem
 from fcmaster.errors import BusError, CommandError, UsageError
-from fcmaster.protocol.codec import DriveCodec, Reply
+from fcmaster.protocol.codec import DriveCodec, DriveError, Reply
 from fcmaster.protocol.drive import DEFAULT_NOMINAL_HZ, ControlIntent, hz_to_pct, pct_to_hz
 from fcmaster.protocol.registry import DEFAULT, spec_for
 from fcmaster.protocol.spec import OptionPairs
@@ -260,6 +260,15 @@ async def status(options: LineOptions, address: int, *, as_json: bool) -> int:
             await observer.over.wait()
         if not observer.replies:
             raise BusError(f"no reply from address {address} on {options.port}", address=address)
+        refused = observer.refused
+        if not observer.statuses and refused is not None:
+            # Its state would read stopped and healthy: a drive of another family than its
+            # profile says refuses the profile's status register.
+            raise BusError(
+                f"address {address} answers but refused the status read ({refused.text}, "
+                f"code {refused.code}): does the drive's profile match it?",
+                address=address,
+            )
     state = fleet.get(plan.name, drive.name)
     assert state is not None
     out = state.to_json()
@@ -471,6 +480,8 @@ class _OneRound:
         self.fleet = fleet
         self.reads = reads
         self.replies = 0
+        self.statuses = 0  # replies that carried a status word
+        self.refused: DriveError | None = None  # the drive's first refusal, if any
         self.stats = DriveStats()  # the master's own, once it runs
         self.over = asyncio.Event()
 
@@ -480,6 +491,9 @@ class _OneRound:
         """Fill the state; the round is over once every poll of it was answered or lost."""
         self.fleet.drive_replied(bus, drive, reply, at, commanded)
         self.replies += 1
+        self.statuses += reply.status is not None
+        if reply.error is not None and self.refused is None:
+            self.refused = reply.error
         if self.replies + self.stats.timeouts >= self.reads:
             self.over.set()
 

@@ -95,3 +95,15 @@ async def test_scan_with_a_profile_says_which_drives_refused_its_status_read() -
     assert found[1]["running"] is False
     assert [found[a]["running"] for a in (2, 4)] == [None, None]
     assert [found[a]["status_word"] for a in (2, 4)] == [None, None]
+
+
+async def test_status_through_another_familys_profile_says_the_drive_refused_it() -> None:
+    async with served() as server:
+        # Address 1 is an ABB drive; told it is an Altivar, its status read is refused.
+        code, out, err = await commissioning.fcmaster(
+            server, "modbus-rtu", "status", "--profile", "altivar-cia402", "--address", "1"
+        )
+    assert code == 1, out
+    assert "refused the status read" in err
+    assert "profile" in err
+    assert "running" not in out  # no state that reads stopped and healthy
