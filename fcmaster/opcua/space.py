@@ -17,11 +17,15 @@ import math
 from collections.abc import Awaitable, Callable, Iterable, Mapping
 from typing import Any, Final
 
+import structlog
 from asyncua import Node, Server, ua
 
+from fcmaster.opcua.access import CALLER
 from fcmaster.opcua.quality import Quality, Reading, readings
 
 __all__ = ["METHODS", "NAMESPACE", "Space"]
+
+log = structlog.get_logger("fcmaster.opcua")
 
 NAMESPACE: Final = "urn:fcmaster"
 V = ua.VariantType
@@ -123,21 +127,29 @@ class Space:
     def _method(
         self, drive: str, method: str, action: str
     ) -> Callable[..., Awaitable[list[ua.Variant] | ua.StatusCode]]:
+        def refused(code: int, reason: str) -> ua.StatusCode:
+            # Refused here, the call never reaches the daemon's audit: it is logged with who
+            # made it instead, as a refused request is.
+            user = CALLER.get()
+            log.warning("opcua.call_refused", actor=f"opcua:{(user and user.name) or 'anonymous'}",
+                        drive=drive, method=method, reason=reason)  # fmt: skip
+            return ua.StatusCode(code)
+
         async def called(parent: ua.NodeId, *args: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
             # asyncua runs a method on whatever object the call names: only its own drive's
             if parent != self._id(f"Drives/{drive}"):
-                return ua.StatusCode(ua.StatusCodes.BadMethodInvalid)
+                return refused(ua.StatusCodes.BadMethodInvalid, f"called on {parent.to_string()}")
             command: dict[str, Any] = {"action": action}
             if method == "SetReference":
                 given = args[0].Value if len(args) == 1 else None
                 # a Boolean is an int to Python, and NaN or infinity no frequency at all
                 if isinstance(given, bool) or not isinstance(given, int | float):
-                    return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+                    return refused(ua.StatusCodes.BadInvalidArgument, f"not a number: {given!r}")
                 if not math.isfinite(given):
-                    return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+                    return refused(ua.StatusCodes.BadInvalidArgument, f"not finite: {given!r}")
                 command["frequency_hz"] = float(given)
             elif args:
-                return ua.StatusCode(ua.StatusCodes.BadTooManyArguments)
+                return refused(ua.StatusCodes.BadTooManyArguments, f"{len(args)} arguments")
             return await self._call(drive, method, command)
 
         return called

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+import structlog.testing
 from asyncua import Server, ua
 
 from fcmaster.adapters.opcua import value_names
@@ -105,8 +106,13 @@ async def _call(space: Space, on: str, method: str, *args: ua.Variant) -> ua.Sta
 async def test_a_reference_that_is_no_finite_number_is_an_invalid_argument(
     space: Space, value: ua.Variant
 ) -> None:
-    status = await _call(space, "Drives/pump-1", "SetReference", value)
+    with structlog.testing.capture_logs() as logged:
+        status = await _call(space, "Drives/pump-1", "SetReference", value)
     assert status.value == ua.StatusCodes.BadInvalidArgument
+    # refused before the daemon's audit, so logged here, with who asked
+    (event,) = [e for e in logged if e["event"] == "opcua.call_refused"]
+    assert (event["drive"], event["method"]) == ("pump-1", "SetReference")
+    assert event["actor"].startswith("opcua:")
     fine = ua.Variant(30.0, ua.VariantType.Double)  # reaches the daemon (here: refused)
     status = await _call(space, "Drives/pump-1", "SetReference", fine)
     assert status.value == ua.StatusCodes.BadUserAccessDenied
