@@ -58,12 +58,13 @@ from fcmaster.protocol.modbus_rtu.keys import (
     same_register,
 )
 from fcmaster.protocol.modbus_rtu.profile import DriveProfile, Register
-from fcmaster.protocol.modbus_rtu.replies import read_reply, scaled, value_of
+from fcmaster.protocol.modbus_rtu.replies import read_reply, scaled, status_refused, value_of
 from fcmaster.protocol.polls import PollCache
 
 # Status and output frequency this close are read together (a few bytes more per poll
 # instead of a poll of its own).
 _JOINT_SPAN: Final = 8
+_READS: Final = (Function.READ_HOLDING, Function.READ_INPUT)
 _FIXED_T35_S: Final = 0.00175  # Serial Line §2.5.1.1: t3.5 above 19200 baud
 _MOTIONS: Final = {
     Motion.STOP: "stop",
@@ -304,8 +305,14 @@ class ModbusCodec:
         if isinstance(response, ExceptionReply):
             if response.function != function:
                 raise UnexpectedReply(f"exception to function {response.function}", raw=frame)
-            code = response.code
-            return Reply(address=exchange.address, error=DriveError(code, exception_text(code)))
+            code, text = response.code, exception_text(response.code)
+            profile = self._known(exchange.address)
+            conditions = None
+            if profile is not None and exchange.parameter is None and function in _READS:
+                conditions = status_refused(profile, code, text)  # its state cannot be read
+            return Reply(
+                address=exchange.address, error=DriveError(code, text), conditions=conditions
+            )
         if isinstance(request, ReadRequest):
             if not isinstance(response, Registers) or response.function != function:
                 raise UnexpectedReply("not the answer to a read", raw=frame)

@@ -54,6 +54,7 @@ def read_reply(
     status = frequency = conditions = value = None
     if (word := held(profile.status)) is not None and key is None:
         status = status_of(profile, word[0])
+        conditions = STATUS_READ  # it takes its profile's status read: no warning of it
     freq_words = held(profile.output_frequency)
     if freq_words is not None and key in (None, OUTPUT_FREQUENCY):
         frequency = hz_of(profile.output_frequency, freq_words, nominal_hz)
@@ -73,6 +74,18 @@ def read_reply(
         conditions=conditions,
         value=value,
     )
+
+
+# A drive that refuses its profile's status read is of another family than its profile says
+# (or set up otherwise): its state cannot be read, which it shows as a warning of its own.
+STATUS_SOURCE = "status read"
+STATUS_READ = ConditionReport(kind="warning", source=STATUS_SOURCE, active=())
+
+
+def status_refused(profile: DriveProfile, code: int, text: str) -> ConditionReport:
+    """The warning of a drive that refused its profile's status read with ``code``."""
+    said = f"refuses the status read of profile {profile.name} ({text}): is it that profile's?"
+    return ConditionReport(kind="warning", source=STATUS_SOURCE, active=(Condition(code, said),))
 
 
 def status_of(profile: DriveProfile, word: int) -> DriveStatus:

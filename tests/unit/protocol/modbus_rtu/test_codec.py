@@ -201,6 +201,29 @@ def test_an_exception_is_the_drives_refusal_with_its_text() -> None:
     assert "failure" in error.text.lower()
 
 
+def test_a_refused_status_read_is_a_warning_that_its_next_status_clears() -> None:
+    # An ABB drive polled through another family's profile refuses the status register.
+    codec = fresh()
+    poll = codec.poll(ABB, None, None)
+    refused = codec.parse(poll, encode_response(ExceptionReply(address=ABB, function=3, code=2)))
+    assert refused.status is None
+    assert refused.conditions is not None
+    assert refused.conditions.kind == "warning"
+    (warning,) = refused.conditions.active
+    assert warning.code == 2
+    assert "refuses the status read of profile abb-drives" in warning.text
+    words = (0x0337, 12000)  # status word and ACT1
+    answered = encode_response(Registers(address=ABB, function=Function.READ_HOLDING, values=words))
+    read = codec.parse(poll, answered)
+    assert read.status is not None
+    assert read.conditions is not None
+    assert (read.conditions.source, read.conditions.active) == (refused.conditions.source, ())
+    # A refused write or parameter read is the command's refusal, not a warning of the drive.
+    stop = codec.control(ATV, STOP)[0]
+    write_refused = encode_response(ExceptionReply(address=ATV, function=6, code=4))
+    assert codec.parse(stop, write_refused).conditions is None
+
+
 def test_a_write_answered_with_another_value_is_not_taken_as_done() -> None:
     exchange = CODEC.control(ATV, STOP)[0]
     wrong = encode_response(WriteSingle(address=ATV, register=8501, value=0x0F))
