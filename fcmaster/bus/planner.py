@@ -296,9 +296,6 @@ class Planner:
         self._in_flight = pending
         if pending is not None:
             self._share.command_sent(now)
-        else:
-            self._share.after_command = False
-        if pending is not None:
             command = pending.command
             if command.action.is_control and pending.intent is None:
                 pending.phase = Phase.LEARNING
@@ -310,6 +307,7 @@ class Planner:
                     target.intent = without_reset(pending.intent)
             return
         assert slot is not None
+        self._share.after_command = False
         if step.kind is StepKind.POLL:
             if slot.urgent_reads:
                 slot.urgent_reads.popleft()

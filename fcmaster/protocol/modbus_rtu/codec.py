@@ -150,6 +150,10 @@ class ModbusCodec:
     ) -> Exchange:
         """The idle poll of ``address`` (module docstring); built once per kind."""
         if intent is not None:  # what the drive is commanded now (see control())
+            before = self._commanded.get(address)
+            if intent.motion is Motion.RUN and (before is None or before.motion is not Motion.RUN):
+                # Just started: a status read before the start says nothing of it now.
+                self._running.pop(address, None)
             self._commanded[address] = intent
         if read is not CONTROL_FEED:
             intent = None  # only the feed depends on it: one cached poll per read

@@ -156,6 +156,22 @@ def test_a_reference_change_while_running_writes_only_the_reference() -> None:
     assert writes(codec.control(ATV, STOP)) == [(8501, 7)]
 
 
+def test_a_status_read_before_a_start_never_makes_a_reference_change_walk_the_sequence() -> None:
+    # The stopped status read before the start, then the start's intent carried by a poll:
+    # a reference change before the next status read writes the reference alone (walking
+    # the sequence again would pass the running drive through "shutdown").
+    codec = fresh()
+    status_poll = codec.poll(ATV, STOP, None)
+    stopped = Registers(address=ATV, function=Function.READ_HOLDING, values=(0x0231, 0))
+    assert codec.parse(status_poll, encode_response(stopped)).status is not None
+    codec.poll(ATV, ControlIntent(Motion.RUN, reference_pct=60.0), CONTROL_FEED)
+    faster = ControlIntent(Motion.RUN, reference_pct=80.0)
+    assert writes(codec.control(ATV, faster)) == [(8502, 400)]
+    # Stopped behind the gateway's back while commanded to run: the start walks it again.
+    codec.parse(status_poll, encode_response(stopped))
+    assert writes(codec.control(ATV, faster)) == [(8502, 400), (8501, 6), (8501, 7), (8501, 15)]
+
+
 @pytest.mark.parametrize(
     ("address", "intent", "expected"),
     [
